@@ -155,6 +155,23 @@ def test_bad_inputs_are_one_line_errors(tmp_path, town):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.las", "one.las", "there.laz"]  # no output left by a refused run
 
 
+@pytest.mark.parametrize(("function", "name", "value"), [("classify_noise", "overwrite", "no"), ("height_above_ground", "overwrite", "false"),
+                                                     ("classify_ground", "overwrite", "no"), ("classify_ground", "heights", "no"),
+                                                     ("classify_ground", "normalize", "no"), ("height_above_ground", "normalize", "no"),
+                                                     ("classify_noise", "progress", "yes"), ("classify_ground", "progress", 1)])  # fmt: skip
+def test_a_switch_not_true_or_false_is_refused_before_the_output_is_touched(town, tmp_path, function, name, value):
+    """overwrite="no" replaced an existing output (check_point_file_output took it as true), and
+    heights="no" / normalize="no" wrote heights: each True/False parameter of the three is
+    checked first, the output left byte for byte as it was."""
+    path, _ = town
+    there = tmp_path / "there.laz"
+    there.write_bytes(b"mine")
+    with pytest.raises(InputError) as caught:
+        getattr(gp, function)(path, there, **{"overwrite": True, name: value})
+    assert str(caught.value) == f"{function}: {name} must be True or False, got {value!r}"
+    assert there.read_bytes() == b"mine" and [p.name for p in tmp_path.iterdir()] == ["there.laz"]
+
+
 def test_a_folder_it_cannot_write_into_is_refused_before_a_point_is_read(town, tmp_path, monkeypatch):
     import os
 

@@ -102,6 +102,21 @@ def test_with_ground_the_noise_is_found_first(surface, tmp_path):
     assert result.params["step"] == 4.0 and result.params["isolated"] == 5
 
 
+def test_with_ground_the_noise_is_true_false_or_a_dict_of_its_parameters(surface, tmp_path):
+    """classify_ground(noise={"stepp": 3}) was a raw TypeError (noise_parameters() got an
+    unexpected keyword argument), noise="yes" and noise=1 "argument after ** must be a mapping"."""
+    path, _, _ = surface
+    for value in ({"stepp": 3}, {"step": 5, "cell": 2}, "yes", 1, [("step", 5)]):
+        with pytest.raises(InputError) as caught:
+            gp.classify_ground(path, tmp_path / "out.laz", noise=value)
+        assert str(caught.value) == f"classify_ground: noise must be True, False or a dict of step, step_z, isolated, got {value!r}"
+    assert list(tmp_path.iterdir()) == []
+    result = gp.classify_ground(path, tmp_path / "out.laz", noise={"step": 5, "isolated": 3})
+    assert result.params["step"] == result.params["step_z"] == 5.0 and result.params["isolated"] == 3 and result.isolated > 0
+    result = gp.classify_ground(path, tmp_path / "out.laz", noise=False, overwrite=True)
+    assert "isolated" not in result.params and result.isolated == 0
+
+
 def test_with_ground_the_noise_is_marked_in_the_input_files_own_passes(surface, tmp_path, monkeypatch):
     """classify_ground(noise=...) marks the noise in the chunks its passes read from the input
     files themselves, not through a stand-in that copied their fields by hand (one did, and a
@@ -199,6 +214,33 @@ def test_the_cli_classifies_noise_and_names_its_options(cli, surface, tmp_path):
     rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz")
     assert rc != 0 and "classify: say what to classify: --ground, --noise, --height-above-ground, or several" in err
     assert not (tmp_path / "b.laz").exists()
+
+
+@pytest.mark.parametrize(("modes", "options", "message"), [
+    (["--ground"], ["--step", "1000", "--isolated", "100000"], "classify: --step, --isolated are for the noise classification: give --noise too"),
+    (["--noise"], ["--cell", "1000", "--window", "5", "--slope", "9"],
+     ("classify: --cell is for the ground classification or the heights above ground: give --ground or --height-above-ground too; "
+     "--slope, --window are for the ground classification: give --ground too")),
+    (["--height-above-ground"], ["--step", "5"], "classify: --step is for the noise classification: give --noise too"),
+    (["--height-above-ground"], ["--step-z", "5", "--threshold", "1"],
+     "classify: --threshold is for the ground classification: give --ground too; --step-z is for the noise classification: give --noise too"),
+    (["--normalize"], ["--scalar", "2"], "classify: --scalar is for the ground classification: give --ground too"),
+])  # fmt: skip
+def test_the_cli_refuses_an_option_no_chosen_classification_uses(cli, surface, tmp_path, modes, options, message):
+    """--ground --step 1000, --noise --cell 1000 and --height-above-ground --step 5 ran with
+    the options ignored (exit 0); only --height-above-ground alone refused SMRF's options."""
+    path, _, _ = surface
+    rc, _, err = cli("classify", path, "-o", tmp_path / "out.laz", *modes, *options, "-q")
+    assert rc != 0 and err == f"error: {message}\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_cli_names_height_above_grounds_cell_as_its_option(cli, surface, tmp_path):
+    """--height-above-ground --cell -1 said "classify: cell must be ...": the option's name was
+    looked for in classify_ground's words, not height_above_ground's."""
+    path, _, _ = surface
+    rc, _, err = cli("classify", path, "-o", tmp_path / "out.laz", "--height-above-ground", "--cell", "-1")
+    assert rc != 0 and err == "error: classify: --cell must be a number > 0, got -1\n"
 
 
 def test_coordinates_in_degrees_need_both_steps_given(tmp_path):

@@ -516,6 +516,27 @@ def test_a_damaged_frame_of_a_recording_is_refused_and_the_rest_play(tmp_path):
     assert player.error is None and player.errors == 3 and [f.time for f in again.frames] == [0.0, 2.0]
 
 
+def test_a_frame_file_the_index_lists_but_missing_is_refused_as_a_damaged_one_is(tmp_path):
+    """A frame file listed in index.json and deleted since was skipped without a word: not in
+    stats.frames_rejected, no last_error, where a damaged one was counted and said."""
+    _recorded(tmp_path / "rec", range(4))
+    files = recording_files(tmp_path / "rec")
+    files[1].unlink()
+    with open(files[2], "r+b") as f:
+        f.truncate(50)
+    again = LiveCloud(keep=10)
+    player = Player(ReplaySource(tmp_path / "rec"), again, rate=None)
+    player.run()
+    assert player.error is None and player.errors == 2 and again.stats.frames_rejected == 2 and [f.time for f in again.frames] == [0.0, 3.0]
+    frames = list(ReplaySource(tmp_path / "rec").frames())
+    assert [type(f).__name__ for f in frames] == ["RecordedFrame", "InputError", "InputError", "RecordedFrame"]
+    assert str(frames[1]) == f"{files[1]}: not a recorded frame (missing: the recording's index.json lists it)"
+    files[3].unlink()  # the last one: the error the HUD shows last
+    again = LiveCloud(keep=10)
+    Player(ReplaySource(tmp_path / "rec"), again, rate=None).run()
+    assert again.stats.frames_rejected == 3 and again.stats.last_error == f"{files[3]}: not a recorded frame (missing: the recording's index.json lists it)"
+
+
 def test_a_junk_file_among_a_recordings_frames_is_said_to_be_no_frame(tmp_path):
     """Files in frames/ that a recording did not write were reported with numpy's reasons: a
     note or an .npy of objects with its pickle message ("This file contains pickled (object)

@@ -537,6 +537,23 @@ def test_cli_volume_of_an_octree_folder_with_all_points_is_the_point_files(cli, 
         gp.volume(autzen_layered["gigapoint"], outside, 16)
 
 
+def test_a_class_filter_leaving_no_point_in_the_box_is_not_said_to_be_outside_the_data(cli, autzen_layered, autzen_path, tmp_path):
+    """--classes 99 over a toe inside the data said "the polygon is outside the data": the class
+    filter left no point there; said so, of the point files and of an octree alike."""
+    toe = tmp_path / "toe.geojson"
+    toe.write_text(json.dumps(square(*AUTZEN_BLOCK)))
+    box = "lies in its box x 636455..636535, y 849225..849260"
+    for source, name in ((autzen_path, autzen_path.name), (autzen_layered["gigapoint"], "autzen_octree")):
+        for filters, kept in (({"classes": 99}, "classes 99"), ({"classes": [98, 99], "drop_classes": 2}, "classes 98, 99; drop classes 2")):
+            with pytest.raises(InputError) as caught:
+                gp.volume(source, toe, 2, **filters)
+            said = str(caught.value)
+            assert said.startswith(f"{toe}: no point of ") and said.endswith(f"{name} ({kept}) {box}: the class filter left none there, or the polygon is outside the data"), said
+        rc, _, err = cli("volume", source, "--clip-polygon", toe, "--gsd", 2, "--classes", 99)
+        assert rc == 1 and err.strip().endswith(f"{name} (classes 99) {box}: the class filter left none there, or the polygon is outside the data") and len(err.strip().splitlines()) == 1, err
+    assert gp.volume(autzen_path, toe, 2, classes=2).area > 0  # (the toe is over the data)
+
+
 BLOCK_OFF_CENTRES = (636455.9375, 849225.875, 636535.9375, 849260.875)  # AUTZEN_BLOCK, its edges off the 2 ft pixels' centres (the test below says how far)
 
 

@@ -14,6 +14,12 @@ from .cloud_opts import RecursiveOption, rate_note, skipped_note, subfolders_rea
 
 #: the lengths' help: in the cloud's units, the default converted from metres
 _UNITS = "in the cloud's units (its CRS's: a cloud in feet takes the default in feet)"
+#: what each mode is called, and its option
+_MODES = {"ground": ("the ground classification", "--ground"), "noise": ("the noise classification", "--noise"),
+          "heights": ("the heights above ground", "--height-above-ground")}  # fmt: skip
+#: the modes each parameter's option is for (--height-above-ground alone makes its ground model of class 2 in cells of --cell)
+_OPTION_MODES = {"cell": ("ground", "heights"), "slope": ("ground",), "window": ("ground",), "threshold": ("ground",), "scalar": ("ground",),
+                 "step": ("noise",), "step_z": ("noise",), "isolated": ("noise",)}  # fmt: skip
 
 
 @app.command()
@@ -45,10 +51,11 @@ def classify(
     if noise and heights and not ground:  # (heights alone are measured from the file's own class 2, which --noise does not make)
         raise GigapointError("classify: --noise and --height-above-ground go together only with --ground; or run them one after the other")
     noise_params = {"step": step, "step_z": step_z, "isolated": isolated}
+    params = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
+    _refuse_unused_options({**params, **noise_params}, {mode for mode, chosen in (("ground", ground), ("noise", noise), ("heights", heights)) if chosen})
     if noise and not ground:
         _classify_noise(inputs, output, noise_params, overwrite, recursive, quiet)
         return
-    params = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
     shown = not quiet and sys.stderr.isatty()
     if not ground:
         _heights_only(subfolders_read(inputs, recursive), output, params, normalize, overwrite, shown)
@@ -57,10 +64,7 @@ def classify(
         result = classify_ground(subfolders_read(inputs, recursive), output, **params, overwrite=overwrite, progress=shown,
                                  noise=noise_params if noise else None, heights=heights, normalize=normalize)  # fmt: skip
     except InputError as exc:  # classify_ground: cell must be ... said as the option
-        message = _noise_options_named(str(exc))
-        for name in params:
-            message = message.replace(f"classify_ground: {name} ", f"classify: --{name} ")
-        raise type(exc)(_as_command(message.replace("classify_ground: ", "classify: "))) from None
+        raise type(exc)(_as_command(str(exc))) from None
     p = result.params
     units = p["units"]
     skipped = skipped_note(result.skipped)
@@ -76,20 +80,33 @@ def classify(
     )
 
 
-def _noise_options_named(message: str) -> str:
-    """classify_noise's message with its parameters said as the options ("classify: --step-z must be ...")."""
-    for name in ("step_z", "step", "isolated"):
-        message = message.replace(f"classify_noise: {name} ", f"classify: --{name.replace('_', '-')} ")
-    message = message.replace("give step and step_z", "give --step and --step-z")
-    return _as_command(message.replace("classify_noise: ", "classify: "))
+def _refuse_unused_options(given: dict, modes: set) -> None:
+    """A one-line error where a parameter is given (not None) whose option none of the chosen
+    ``modes`` uses ("classify: --step is for the noise classification: give --noise too"):
+    --ground --step 1000 ran with the default step, silently."""
+    unused: dict[tuple, list[str]] = {}
+    for name, value in given.items():
+        if value is not None and not modes & set(_OPTION_MODES[name]):
+            unused.setdefault(_OPTION_MODES[name], []).append(f"--{name.replace('_', '-')}")
+    said = []
+    for owners, options in unused.items():
+        what, flags = (" or ".join(_MODES[mode][i] for mode in owners) for i in (0, 1))
+        said.append(f"{', '.join(options)} {'is' if len(options) == 1 else 'are'} for {what}: give {flags} too")
+    if said:
+        raise GigapointError(f"classify: {'; '.join(said)}")
 
 
 def _as_command(message: str) -> str:
-    """A classification's message said of the command: the command for its function ("out.txt:
-    classify writes a .las, ..." was "classify_noise writes"; main() says overwrite=True as the option)."""
+    """A classification's message said of the command: its parameters as the options
+    ("classify: --step-z must be ...", whichever function said it: height_above_ground's cell was
+    left "classify: cell"), the command for its function ("out.txt: classify writes a .las, ..."
+    was "classify_noise writes"; main() says overwrite=True as the option)."""
     for function in ("classify_ground", "classify_noise", "height_above_ground"):
         message = message.replace(f": {function} writes ", ": classify writes ")
-    return message
+        for name in _OPTION_MODES:
+            message = message.replace(f"{function}: {name} ", f"classify: --{name.replace('_', '-')} ")
+        message = message.replace(f"{function}: ", "classify: ")
+    return message.replace("(--ground, heights=True)", "(--ground)")
 
 
 def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursive: bool, quiet: bool) -> None:
@@ -99,7 +116,7 @@ def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursi
     try:
         result = classify_noise(subfolders_read(inputs, recursive), output, **params, overwrite=overwrite, progress=not quiet and sys.stderr.isatty())
     except InputError as exc:
-        raise type(exc)(_noise_options_named(str(exc))) from None
+        raise type(exc)(_as_command(str(exc))) from None
     p = result.params
     skipped = skipped_note(result.skipped)
     kept = f", {result.kept_noise:,} noise kept" if result.kept_noise else ""
@@ -128,14 +145,10 @@ def _heights_only(sources, output: Path, params: dict, normalize: bool, overwrit
     """--height-above-ground without --ground: from the class-2 points the files have."""
     from ..survey.heights import height_above_ground
 
-    smrf_only = [f"--{name}" for name, value in params.items() if value is not None and name != "cell"]
-    if smrf_only:
-        raise GigapointError(f"classify: {', '.join(smrf_only)} {'is' if len(smrf_only) == 1 else 'are'} for the ground classification: give --ground too")
     try:
         result = height_above_ground(sources, output, cell=params["cell"], normalize=normalize, overwrite=overwrite, progress=progress)
     except InputError as exc:
-        message = str(exc).replace("classify_ground: cell ", "classify: --cell ").replace("(--ground, heights=True)", "(--ground)")
-        raise type(exc)(_as_command(message.replace("height_above_ground: ", "classify: "))) from None
+        raise type(exc)(_as_command(str(exc))) from None
     p = result.params
     skipped = skipped_note(result.skipped)
     print(

@@ -190,7 +190,7 @@ def _opt(z, name):
 
 
 def read_frame(path: Path) -> RecordedFrame:
-    """One recorded frame (an npz written by Recorder)."""
+    """One recorded frame (an npz written by Recorder); one missing, or no frame, a one-line InputError."""
     try:
         with open(path, "rb") as f:
             # another file (notes, an .npy): numpy's reason was a pickle's ("allow_pickle=False"), of no frame
@@ -201,6 +201,8 @@ def read_frame(path: Path) -> RecordedFrame:
                 frame = _frame_of(path, z)
                 frame.origin = str(path)
                 return frame
+    except FileNotFoundError:  # (a file the index lists, deleted since: it was skipped without a word)
+        raise InputError(f"{path}: not a recorded frame (missing: the recording's {INDEX} lists it)") from None
     except (OSError, ValueError, TypeError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a truncated or damaged npz (TypeError: a time of several values)
         raise InputError(f"{path}: not a recorded frame ({first_line(exc)})") from None
 
@@ -253,7 +255,8 @@ def _read_index(directory: Path) -> dict:
 
 
 def recording_files(directory) -> list[Path]:
-    """The frame files of a recording, in order: index.json's, then any written after it."""
+    """The frame files of a recording, in order: index.json's (a missing one too: read_frame
+    refuses it, and the replay counts it, as a damaged one), then any written after it."""
     directory = Path(directory)
     index = directory / INDEX
     meta = _read_index(directory)
@@ -262,13 +265,13 @@ def recording_files(directory) -> list[Path]:
     entries = meta.get("frames", [])
     if not isinstance(entries, list):  # (7 was a TypeError)
         raise InputError(f"{index}: damaged: its frames are not a list")
-    # an entry that is not a relative name inside the recording (5 was a TypeError; "/etc/hostname" was read) is left out
-    # as a missing file is: judged by its name, not a resolve (a stat a component) for each of thousands of frames
+    # an entry that is not a relative name inside the recording (5 was a TypeError; "/etc/hostname" was read) is left out,
+    # judged by its name, not a resolve (a stat a component) for each of thousands of frames
     named = [Path(e["file"]) for e in entries if isinstance(e, dict) and isinstance(e.get("file"), str)]
     listed = [directory / f for f in named if not f.is_absolute() and ".." not in f.parts]
     seen = {p.name for p in listed}
     later = [p for p in _frame_files(directory) if p.name not in seen]
-    return [p for p in listed if p.is_file()] + later
+    return listed + later
 
 
 def stopped_early(directory) -> str | None:

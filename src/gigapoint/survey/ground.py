@@ -45,7 +45,7 @@ from ..errors import InputError
 from ..render.raster_fill import fill_everywhere
 from .ground_raster import GROUND, NOISE_CLASSES, NON_GROUND, files_grid, ground_parameters, point_files, progress_bar, write_through
 from .heights import HeightSpan, heights_over
-from .noise import noise_classified, noise_parameters, sparse_cells
+from .noise import noise_classified, noise_option, noise_parameters, sparse_cells
 from .raster_grid import RasterGrid
 
 #: SMRF's low-outlier step: an opening of the inverted surface with this slope, radius 1 cell
@@ -165,14 +165,15 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
     bounded by the raster (see the module's notes). Parameters in the cloud's units, None: the
     defaults converted from metres (``ground_parameters``). ``out`` appears only once whole; an
     existing one is replaced only with ``overwrite``. ``noise``: classify_noise's parameters
-    (a dict; True: its defaults) to classify isolated points 7 first, in a pass of its own, and
+    (a dict of step, step_z, isolated; True: its defaults) to classify isolated points 7 first, in a pass of its own, and
     keep them out of the ground. ``heights``: each point's height above
     the ground model just made written too (``height_above_ground``'s attribute; ``normalize``:
     as its z as well)."""
     t0 = time.perf_counter()
-    out, inputs = point_files(source, out, overwrite, chunk_size, "classify_ground")
+    noise = noise_option(noise, "classify_ground")
+    out, inputs = point_files(source, out, chunk_size, "classify_ground", overwrite=overwrite, progress=progress, heights=heights, normalize=normalize)
     params = ground_parameters(inputs.files, cell, slope, window, threshold, scalar)
-    noise_params = noise_parameters(inputs.files, **({} if noise is True else noise)) if noise else None
+    noise_params = noise_parameters(inputs.files, **noise) if noise is not None else None
     shown = progress_bar(progress)
     try:
         # Noise found first (a pass of its own) is marked 7 in each chunk both later passes read,

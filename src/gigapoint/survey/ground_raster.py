@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, count_text, is_real, number_text
+from ..errors import InputError, check_switch, count_text, is_real, number_text
 from .raster_grid import RasterGrid
 
 #: PDAL's and the paper's defaults, in metres (``slope``: rise over run, no unit)
@@ -68,18 +68,22 @@ def unit_symbol(unit: dict | None) -> str:
     return unit["symbol"] if unit is not None else "m (assumed)"
 
 
-def point_files(source, out, overwrite: bool, chunk_size: int | None, where: str):
+def point_files(source, out, chunk_size: int | None, where: str, **switches):
     """(``out`` as a Path, the PointFiles of ``source`` it is written from) for a classification
     that writes every point of its inputs again: ``out`` a .las, .laz or .ply file not there
-    yet (or ``overwrite``), checked before a point is read (one-line errors starting ``where``)."""
+    yet (or ``overwrite``), checked before a point is read (one-line errors starting ``where``).
+    ``switches``: the classification's True/False parameters (``overwrite`` among them), each
+    checked first: overwrite="no" replaced the file, heights="no" wrote heights."""
     from ..io import given_paths
     from ..io.write import check_point_file_output
     from ..lod.convert.to_file import PointFiles
 
+    for name, value in switches.items():
+        check_switch(name, value, where)
     out = Path(out)
     if out.suffix.lower() not in (".las", ".laz", ".ply"):
         raise InputError(f"{out}: {where} writes a .las, .laz or .ply file")
-    check_point_file_output(out, overwrite)
+    check_point_file_output(out, switches["overwrite"])
     return out, PointFiles(given_paths(source, where, "source"), out, chunk_size, ply=out.suffix.lower() == ".ply", where=where)
 
 

@@ -110,7 +110,7 @@ def height_above_ground(source, out, *, cell=None, normalize: bool = False, over
     (``classify_ground(..., heights=True)`` classifies and measures in one run). Two passes,
     memory bounded by the raster."""
     t0 = time.perf_counter()
-    out, inputs = point_files(source, out, overwrite, chunk_size, "height_above_ground")
+    out, inputs = point_files(source, out, chunk_size, "height_above_ground", overwrite=overwrite, progress=progress, normalize=normalize)
     params = {k: v for k, v in ground_parameters(inputs.files, cell=cell, where="height_above_ground", lengths=("cell",)).items() if k in ("cell", "units", "height_units")}
     shown = progress_bar(progress)
     span, tally = HeightSpan(), {}

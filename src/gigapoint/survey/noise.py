@@ -51,6 +51,23 @@ class NoiseResult:
         return self.points / self.seconds if self.seconds > 0 else 0.0
 
 
+#: noise_parameters' keywords: what classify_ground's ``noise`` dict may give
+NOISE_KEYS = ("step", "step_z", "isolated")
+
+
+def noise_option(noise, where: str) -> dict | None:
+    """classify_ground's ``noise`` as noise_parameters' keywords: None where it is None, False or
+    empty, {} (the defaults) where True, the dict where its keys are NOISE_KEYS; anything else a
+    one-line InputError naming them (noise={"stepp": 3} was a TypeError, noise="yes" another)."""
+    from collections.abc import Mapping
+
+    if noise is None or isinstance(noise, (bool, np.bool_)):
+        return {} if noise else None
+    if isinstance(noise, Mapping) and set(noise) <= set(NOISE_KEYS):
+        return dict(noise) or None
+    raise InputError(f"{where}: noise must be True, False or a dict of {', '.join(NOISE_KEYS)}, got {noise!r}")
+
+
 def noise_parameters(files, step=None, step_z=None, isolated=None) -> dict:
     """The noise parameters in the units of ``files``' CRS: ``step`` (the cells' horizontal
     edge) as given, else 4 m converted; ``step_z`` (their height) as given, else as long as
@@ -90,7 +107,7 @@ def classify_noise(source, out, *, step=None, step_z=None, isolated=None, overwr
     None: the defaults (``noise_parameters``). ``out`` appears only once whole; an existing one
     is replaced only with ``overwrite``."""
     t0 = time.perf_counter()
-    out, inputs = point_files(source, out, overwrite, chunk_size, "classify_noise")
+    out, inputs = point_files(source, out, chunk_size, "classify_noise", overwrite=overwrite, progress=progress)
     params = noise_parameters(inputs.files, step, step_z, isolated)
     shown = progress_bar(progress)
     try:

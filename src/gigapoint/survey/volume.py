@@ -420,7 +420,12 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
             raise EmptyCloudError(label)
     except EmptyCloudError:
         (x0, y0), (x1, y1) = toe.lo, toe.hi
-        raise InputError(f"{toe.source}: no point of {label} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}: the polygon is outside the data") from None
+        in_box = f"lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}"
+        if classes is None and drop_classes is None:
+            raise InputError(f"{toe.source}: no point of {label} {in_box}: the polygon is outside the data") from None
+        # (the class filter may have left none where the data is: "outside the data" misled)
+        kept = point_filter(classes, drop_classes, where="volume").describe()
+        raise InputError(f"{toe.source}: no point of {label} ({kept}) {in_box}: the class filter left none there, or the polygon is outside the data") from None
     heights = drawn if fill_nodata is None else fill_heights(drawn, None if fill_nodata == "all" else fill_nodata)
     grid = RasterGrid.of_camera(camera)
     groups = _pile_parts(toe)
