@@ -368,8 +368,8 @@ def test_a_geojson_dicts_placement_refusals_start_with_the_operation_as_its_ring
         f"open: the GeoJSON geometry: names EPSG:99999, a CRS PROJ does not know: cannot move it into {autzen_path}'s CRS"
     )
     assert refusal(EmptyCloudError, opened, far) == (  # (the far-away hint: named once, the dict never quoted)
-        f"{autzen_path}: no point passes the filter (clip polygon open: the GeoJSON geometry (4 vertices)): 110,000 points read; "
-        "open: the GeoJSON geometry spans x 736300..737200, y 848900..849600, far from the points' x 636002..637179, y 848935..849498: give it in the files' coordinates"
+        f"{autzen_path}: no point passes the filter (clip polygon the GeoJSON geometry (4 vertices)): 110,000 points read; "
+        "the GeoJSON geometry spans x 736300..737200, y 848900..849600, far from the points' x 636002..637179, y 848935..849498: give it in the files' coordinates"
     )
     monkeypatch.setitem(sys.modules, "pyproj", None)  # (import pyproj raises ImportError)
     degrees = {**lonlat, "crs": {"type": "name", "properties": {"name": "EPSG:4326"}}}
@@ -379,6 +379,10 @@ def test_a_geojson_dicts_placement_refusals_start_with_the_operation_as_its_ring
     )
     with pytest.raises(InputError, match=r"^open: clip_polygon=\{'type': 'Polygon', .*: the polygon's points lie on one line"):  # (its ring errors, as before)
         opened({**degrees, "coordinates": [LON_LAT_TRIANGLE[:2]]})
+    # (the label is the messages', not the polygon's data: a conversion's fingerprint and a Dask task's copy keep its source)
+    kept = point_filter(clip_polygon=lonlat, where="convert").polygon
+    assert kept.named == "convert: the GeoJSON geometry" and kept.as_spec()["source"] == "the GeoJSON geometry"
+    assert kept.describe() == "clip polygon the GeoJSON geometry (3 vertices)"
 
 
 def test_a_geojson_naming_another_crs_than_the_files_is_warned_of_without_pyproj(tmp_path, monkeypatch):

@@ -306,7 +306,7 @@ def may_move(polygon: ClipPolygon) -> bool:
 def placed_in(polygon: ClipPolygon, crs: str | None, units: dict, bounds, where) -> ClipPolygon:
     """``polygon`` in the coordinates of points in ``crs`` (the module's notes; ``units``: its
     io.crs_units, ``bounds``: the points' (lo, hi) box, ``where``: how messages name them, a file
-    or a survey; the polygon by its source, a bare GeoJSON dict's as its caller named it:
+    or a survey; the polygon as ``named``, a bare GeoJSON dict's as its caller labels it:
     'volume: the GeoJSON geometry', ``clip_polygon_of``): moved from the CRS its GeoJSON names into ``crs`` where pyproj is installed;
     else as it is (a warning where both name EPSG codes that differ), or a one-line InputError
     where it lies in longitude/latitude's range far from points in a projected CRS
@@ -327,13 +327,13 @@ def placed_in(polygon: ClipPolygon, crs: str | None, units: dict, bounds, where)
     refuse_lon_lat(polygon, crs, units, bounds, where)
     epsg = horizontal_epsg(crs)
     if polygon.epsg is not None and epsg is not None and epsg != polygon.epsg:
-        message = f"{polygon.source} names EPSG:{polygon.epsg}, {where} EPSG:{epsg}: the polygon is taken in the files' coordinates, not reprojected"
+        message = f"{polygon.named} names EPSG:{polygon.epsg}, {where} EPSG:{epsg}: the polygon is taken in the files' coordinates, not reprojected"
         read_once("clip polygon CRS", f"{polygon.source} EPSG:{epsg}", lambda: warn(message, GigapointWarning))
     return polygon
 
 
 def refuse_lon_lat(polygon: ClipPolygon, crs: str, units: dict, bounds, where) -> None:
-    """A one-line InputError, naming it by its source, where ``polygon``, taken as it is, lies within longitude/latitude's
+    """A one-line InputError, naming it ``named``, where ``polygon``, taken as it is, lies within longitude/latitude's
     range far from the ``bounds`` (lo, hi) of points (named ``where``) in ``crs``, a projected CRS
     (``units``: its io.crs_units): it would clip nothing. ``bounds`` None (a PLY header tells
     none): not here, the points as read tell (PointFilter). One naming no CRS is lon/lat by RFC 7946;
@@ -347,11 +347,11 @@ def refuse_lon_lat(polygon: ClipPolygon, crs: str, units: dict, bounds, where) -
     (x0, y0), (x1, y1) = polygon.lo, polygon.hi
     if polygon.epsg is None:
         raise InputError(
-            f"{polygon.source}: x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g} looks like longitude/latitude (RFC 7946 GeoJSON) while {where} "
+            f"{polygon.named}: x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g} looks like longitude/latitude (RFC 7946 GeoJSON) while {where} "
             f"is in {crs_name(crs)}: add a crs member naming its CRS, or reproject it into the files' coordinates"
         )
     raise InputError(
-        f"{polygon.source}: names EPSG:{polygon.epsg} while {where} is in {crs_name(crs)}: moving it there needs pyproj "
+        f"{polygon.named}: names EPSG:{polygon.epsg} while {where} is in {crs_name(crs)}: moving it there needs pyproj "
         f"(pip install 'gigapoint[gis]'), or reproject it into the files' coordinates"
     )
 
@@ -369,7 +369,7 @@ def _moved_into(polygon: ClipPolygon, crs: str, path) -> ClipPolygon | None:
     try:
         source = pyproj.CRS.from_epsg(polygon.epsg)
     except pyproj.exceptions.CRSError:
-        raise InputError(f"{polygon.source}: names EPSG:{polygon.epsg}, a CRS PROJ does not know: cannot move it into {path}'s CRS") from None
+        raise InputError(f"{polygon.named}: names EPSG:{polygon.epsg}, a CRS PROJ does not know: cannot move it into {path}'s CRS") from None
     try:
         target = pyproj.CRS.from_user_input(crs)
     except pyproj.exceptions.CRSError:

@@ -64,17 +64,20 @@ class ClipPolygon:
     label in ``gigapoint volume``). ``features``: per polygon the number of that Feature (0, 1, ...
     in the file's order; None outside one): a Feature's MultiPolygon is one stockpile in parts.
     ``moved_from``: the CRS it was moved from into the points' (``moved_polygon``; None: as read):
-    it is in their coordinates, never moved again. filters.py's caches: ``placed_by_file``, this
+    it is in their coordinates, never moved again. ``named``: how a message starting with it names
+    it, its source unless its caller labels a bare GeoJSON dict ('volume: the GeoJSON geometry';
+    not in ``as_spec``: a conversion's fingerprint and a Dask task's copy keep the source). filters.py's caches: ``placed_by_file``, this
     polygon in the coordinates of each file filtered (by its path); ``moved_by_crs``, it moved
     into each CRS (by io.crs_identity: one CRS however its files write it; None: no pyproj to
     move it), once a CRS however many files are in it."""
 
     def __init__(
         self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None, names: list[str | None] | None = None, features: list[int | None] | None = None,
-        moved_from: str | None = None,
+        moved_from: str | None = None, named: str | None = None,
     ):  # fmt: skip
         self.polygons = polygons
         self.source = source
+        self.named = named or source
         self.epsg = epsg
         self.names = names or [None] * len(polygons)
         self.features = features or [None] * len(polygons)
@@ -160,14 +163,17 @@ def polygon_text(value, shown: str | None = None) -> str:
 
 def clip_polygon_of(value, label: str, unnamed: str = UNNAMED_GEOMETRY) -> ClipPolygon:
     """The ClipPolygon of ``value``: a path to a GeoJSON or WKT file, a WKT string, a GeoJSON
-    geometry (a dict: ``as_spec``'s too; its source ``unnamed`` where it names none, as the
-    messages that start with it name it: 'open: the GeoJSON geometry') or a ClipPolygon; a
+    geometry (a dict: ``as_spec``'s too; where it names no source, 'the GeoJSON geometry',
+    ``named`` ``unnamed`` in the messages that start with it: 'open: the GeoJSON geometry') or a ClipPolygon; a
     one-line InputError starting with ``label`` (the option as given) for anything else."""
     if isinstance(value, ClipPolygon):
         return value
     if isinstance(value, dict):
-        source = value.get("source") if isinstance(value.get("source"), str) else unnamed
-        return _geojson_polygon(value, source, label)
+        if isinstance(value.get("source"), str):
+            return _geojson_polygon(value, value["source"], label)
+        polygon = _geojson_polygon(value, UNNAMED_GEOMETRY, label)
+        polygon.named = unnamed
+        return polygon
     if not isinstance(value, (str, os.PathLike)):
         raise InputError(f"{label}: a clip polygon is a GeoJSON or WKT file, or WKT text (POLYGON ((x y, ...)))")
     text = str(value)
@@ -410,10 +416,10 @@ def moved_polygon(polygon: ClipPolygon, source, target, tolerance: float | None 
     source, target = pyproj_horizontal(source, bound=True), pyproj_horizontal(target, bound=True)
     came_from = f"EPSG:{polygon.epsg}" if polygon.epsg is not None else source.name
     if same:
-        return ClipPolygon(polygon.polygons, polygon.source, None, polygon.names, polygon.features, came_from)
+        return ClipPolygon(polygon.polygons, polygon.source, None, polygon.names, polygon.features, came_from, polygon.named)
     move = pyproj.Transformer.from_crs(source, target, always_xy=True)
     moved = [[_moved_ring(ring, move, tolerance, polygon.source, target.name) for ring in rings] for rings in polygon.polygons]
-    return ClipPolygon(moved, polygon.source, None, polygon.names, polygon.features, came_from)
+    return ClipPolygon(moved, polygon.source, None, polygon.names, polygon.features, came_from, polygon.named)
 
 
 def _moved_ring(ring: np.ndarray, move, tolerance: float | None, source: str, target_name: str) -> np.ndarray:
@@ -559,7 +565,7 @@ def crossing_problem(ring, name: str = "the polygon") -> str | None:
 
 
 def check_simple(polygon: ClipPolygon, why: str) -> None:
-    """A one-line InputError naming ``polygon`` (its source), the ring and its edges where a ring crosses
+    """A one-line InputError naming ``polygon`` (``named``), the ring and its edges where a ring crosses
     itself, ending with ``why`` it matters. What measures an area calls it (a volume's toe): the
     shoelace's area and the even-odd rule's inside differ there. A clip is well defined by the
     even-odd rule, a self-crossing polygon's included: clipping does not call it."""
@@ -568,7 +574,7 @@ def check_simple(polygon: ClipPolygon, why: str) -> None:
         for r, ring in enumerate(rings):
             problem = crossing_problem(ring, _ring_name(p, r, several))
             if problem:
-                raise InputError(f"{polygon.source}: {problem}: {why}")
+                raise InputError(f"{polygon.named}: {problem}: {why}")
 
 
 def check_holes(polygon: ClipPolygon, label: str | None = None) -> None:

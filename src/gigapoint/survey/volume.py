@@ -383,7 +383,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     check_switch("full", full, "volume")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("volume: fill_nodata", fill_nodata)
-    unnamed = f"volume: {UNNAMED_GEOMETRY}"  # (a bare dict's name in every message, as its ring and hole errors name it)
+    unnamed = f"volume: {UNNAMED_GEOMETRY}"  # (a bare dict's name in the messages starting with it, as its ring and hole errors name it)
     label = unnamed if isinstance(clip_polygon, dict) else f"volume: clip_polygon={polygon_text(clip_polygon)}"
     toe = clip_polygon_of(clip_polygon, label, unnamed)
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
@@ -422,10 +422,10 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
         (x0, y0), (x1, y1) = toe.lo, toe.hi
         in_box = f"lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}"
         if classes is None and drop_classes is None:
-            raise InputError(f"{toe.source}: no point of {label} {in_box}: the polygon is outside the data") from None
+            raise InputError(f"{toe.named}: no point of {label} {in_box}: the polygon is outside the data") from None
         # (the class filter may have left none where the data is: "outside the data" misled)
         kept = point_filter(classes, drop_classes, where="volume").describe()
-        raise InputError(f"{toe.source}: no point of {label} ({kept}) {in_box}: the class filter left none there, or the polygon is outside the data") from None
+        raise InputError(f"{toe.named}: no point of {label} ({kept}) {in_box}: the class filter left none there, or the polygon is outside the data") from None
     heights = drawn if fill_nodata is None else fill_heights(drawn, None if fill_nodata == "all" else fill_nodata)
     grid = RasterGrid.of_camera(camera)
     groups = _pile_parts(toe)
@@ -433,7 +433,7 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
     above_base = np.full(grid.shape, np.nan, np.float32)
     piles = []
     for name, members in groups:
-        where = f"{toe.source}: {name}" if len(groups) > 1 else toe.source
+        where = f"{toe.named}: {name}" if len(groups) > 1 else toe.named
         pile, rows, cols, above = _pile([toe.polygons[i] for i in members], [insides[i] for i in members], name, drawn, heights, grid, base, where, label)
         piles.append(pile)
         _warn_if_empty(pile, where, fill_nodata)
