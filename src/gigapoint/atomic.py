@@ -151,7 +151,8 @@ def output_file_refusal(path, overwrite: bool, what: str, suffixes=None, kind: s
     made and written into (``folder_refusal``); None where it can. An ``overwrite`` not True or
     False is refused first. Images, videos and point files
     check this (``refuse`` says it)."""
-    if not isinstance(overwrite, (bool, np.bool_)):  # (every writer's last guard: overwrite="no" is true and replaced the file)
+    # (every writer's last guard: overwrite="no" is true and replaced the file; errors.check_switch's test: atomic may not import errors)
+    if not isinstance(overwrite, (bool, np.bool_)):
         return f"overwrite must be True or False, got {overwrite!r}"
     path = Path(path)
     if path.is_dir():  # (before the suffix: "unsupported ... type '(none)'" for -o FOLDER hid what was wrong)

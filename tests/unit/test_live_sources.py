@@ -530,11 +530,11 @@ def test_a_frame_file_the_index_lists_but_missing_is_refused_as_a_damaged_one_is
     assert player.error is None and player.errors == 2 and again.stats.frames_rejected == 2 and [f.time for f in again.frames] == [0.0, 3.0]
     frames = list(ReplaySource(tmp_path / "rec").frames())
     assert [type(f).__name__ for f in frames] == ["RecordedFrame", "InputError", "InputError", "RecordedFrame"]
-    assert str(frames[1]) == f"{files[1]}: not a recorded frame (missing: the recording's index.json lists it)"
+    assert str(frames[1]) == f"{files[1]}: no such file"
     files[3].unlink()  # the last one: the error the HUD shows last
     again = LiveCloud(keep=10)
     Player(ReplaySource(tmp_path / "rec"), again, rate=None).run()
-    assert again.stats.frames_rejected == 3 and again.stats.last_error == f"{files[3]}: not a recorded frame (missing: the recording's index.json lists it)"
+    assert again.stats.frames_rejected == 3 and again.stats.last_error == f"{files[3]}: no such file"
 
 
 def test_a_junk_file_among_a_recordings_frames_is_said_to_be_no_frame(tmp_path):

@@ -83,7 +83,7 @@ def volume(
         raise CameraError(f"{keep.polygon.source}: --gsd over its box: {exc}") from None
     rasters = [(output, result.above_base), (preview, None if preview is None else result.preview()), (dsm_out, result.heights)]
     # all or none; nothing asked, nothing written (nor a word on the .prj none would have)
-    written = write_map(result.camera, result.crs, result.units, rasters, overwrite, checked=True) if any(path for path, _ in rasters) else []
+    written = write_map(result.camera, result.crs, result.units, rasters, overwrite) if any(path for path, _ in rasters) else []
     summary = result.summary()
     if as_json:
         typer.echo(json.dumps({**summary, "outputs": [str(p) for p in written]}, indent=1))

@@ -202,7 +202,7 @@ def read_frame(path: Path) -> RecordedFrame:
                 frame.origin = str(path)
                 return frame
     except FileNotFoundError:  # (a file the index lists, deleted since: it was skipped without a word)
-        raise InputError(f"{path}: not a recorded frame (missing: the recording's {INDEX} lists it)") from None
+        raise InputError(f"{path}: no such file") from None
     except (OSError, ValueError, TypeError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a truncated or damaged npz (TypeError: a time of several values)
         raise InputError(f"{path}: not a recorded frame ({first_line(exc)})") from None
 

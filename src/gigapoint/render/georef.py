@@ -219,25 +219,22 @@ def raster_writes(camera: Camera, crs: str | None, wkt: str | None, units: dict,
     return writes
 
 
-def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: bool = False, checked: bool = False) -> list[Path]:
+def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: bool = False) -> list[Path]:
     """``rasters`` ((path, array) pairs: ``raster_writes``) written with their world files and
     .prj files, all or none (atomic.write_together), as the CLI writes them; returns the paths
     written. Each is checked first: its type (a surface model is a .tif), an existing file
     refused without ``overwrite``. A .prj that holds this very CRS already (an earlier product of
     the same map beside it: change.tif, then change.png) is kept; with no CRS to write, one
     there is removed with ``overwrite`` (``write_map_files``). Why no .prj is written, a GeoTIFF
-    names no CRS, or a .prj was removed, is a GigapointWarning. ``checked``: the rasters' paths and
-    their world files were checked already, before the survey was read (the CLI's check_output and
-    ``check_side_outputs``), not again."""
+    names no CRS, or a .prj was removed, is a GigapointWarning. (The CLI checked the paths before
+    reading the survey; checked again here, a few stats, for the Python callers.)"""
     rasters = [(Path(path), array) for path, array in rasters if path is not None]
     wkt = crs_wkt(crs)
     for path, array in rasters:
-        if not checked:
-            check_output(path, overwrite, GEOTIFF_SUFFIXES if np.ndim(array) == 2 else IMAGE_SUFFIXES)
+        check_output(path, overwrite, GEOTIFF_SUFFIXES if np.ndim(array) == 2 else IMAGE_SUFFIXES)
         check_image_fits(path, camera.width, camera.height)
     images = [path for path, _ in rasters]
-    if not checked:
-        check_world_files_apart(images)
+    check_world_files_apart(images)
     side_writes, notes, stale = checked_side_writes(camera, images, crs, wkt, units, overwrite)
     written = write_map_files([(path, _said(path, save)) for path, save in raster_writes(camera, crs, wkt, units, rasters) + side_writes], stale)
     for note in notes:
