@@ -144,10 +144,11 @@ def test_one_point_or_equal_points_save_on_a_millimetre_grid(tmp_path, copies):
 
 def test_one_point_far_out_saves_on_the_grid_float64_tells_apart(tmp_path):
     """A point at 1e12 m has no extent: it got the millimetre, though float64 tells no finer steps
-    than 2e-15 of its coordinates apart there (0.002): that floor, as for a cloud with an extent."""
+    than 2e-15 of its coordinates apart there (0.002): that floor, as for a cloud with an extent
+    (its power of ten at or below: 0.001, ~8 of float64's steps there)."""
     from gigapoint.io.las_fields import default_step
 
-    far = 2e-15 * 1e12
+    far = 0.001
     assert default_step([1e12, -1e12, 5.0], [1e12, -1e12, 5.0]) == far
     assert default_step([0, 0, 0], [0, 0, 0]) == 0.001  # (near 0: the millimetre)
     xyz = np.array([[1e12, -1e12, 5.0]])
@@ -580,3 +581,50 @@ def test_attribute_values_beyond_their_las_field_are_said_once_a_field_on_save(t
     with warnings.catch_warnings():
         warnings.simplefilter("error", GigapointWarning)
         gp.from_arrays(xyz, intensity=np.array([0, 65535, 3, 7])).save(tmp_path / "fits.laz")
+
+
+def test_attribute_values_beyond_their_las_field_are_said_once_a_field_in_copc(tmp_path):
+    """A cloud converted to COPC clipped intensity 70 000 to 65 535 without a word (the LAS save says it)."""
+    xyz = np.c_[np.arange(4.0), np.zeros(4), np.zeros(4)]
+    cloud = gp.from_arrays(xyz, intensity=np.array([-5, 70000, 70001, 7]))
+    out = tmp_path / "x.copc.laz"
+    with pytest.warns(GigapointWarning) as said:
+        gp.convert(cloud, out, progress=False)
+    assert [str(w.message) for w in said if "intensity" in str(w.message)] == [
+        f"{out}: 3 intensity values beyond 0..65535, what its LAS field holds: written as 0 or 65535"
+    ]
+    assert sorted(np.asarray(laspy.read(out).intensity).tolist()) == [0, 7, 65535, 65535]
+
+
+def test_a_potree_output_that_must_coarsen_the_inputs_scale_says_it_once(tmp_path):
+    """Potree counts positions from the lowest point in 31 bits: points 30 000 km apart at scale
+    0.01 (3e9 steps, which centred 32-bit integers hold: a LAS output keeps 0.01) were written at
+    scale 0.0279 without a word."""
+    import json
+
+    _far_las(tmp_path / "near.las", 0.0)
+    _far_las(tmp_path / "far.las", 30_000_000.0)
+    out = tmp_path / "pot"
+    with pytest.warns(GigapointWarning) as said:
+        gp.convert([tmp_path / "near.las", tmp_path / "far.las"], out, format="potree", progress=False)
+    scale = json.loads((out / "metadata.json").read_text())["scale"]
+    assert scale[0] == pytest.approx((30_000_001.25 - 0.5) / 2**30) and scale[1:] == [0.01, 0.01]
+    coarse = [str(w.message) for w in said if "32-bit" in str(w.message)]
+    want = f"{out}: the points span more than 32-bit integers hold at scale 0.01, 0.01, 0.01: written at scale {scale[0]:.6g}, 0.01, 0.01"
+    assert coarse == [f"{want}, positions moved by up to {scale[0] / 2:.3g}"]
+
+
+def test_decimal_values_of_a_text_file_read_back_as_they_were(tmp_path, monkeypatch):
+    """Points without a grid of their own got 3/65 536 m steps from an offset off the decimal
+    values: a text file's 1.0 came back 0.99998. The step is now a power of ten (1e-5 here) from
+    a whole-number offset."""
+    from gigapoint.cli import main
+
+    (tmp_path / "clean.xyz").write_text("x y z\n1 2 3\n4 5 6\n")
+    monkeypatch.chdir(tmp_path)
+    assert main(["tile", "clean.xyz", "--size", "500", "-o", "t"]) == 0
+    gp.convert(tmp_path / "clean.xyz", tmp_path / "x.laz", progress=False)
+    for path in (tmp_path / "t" / "clean_0_0.laz", tmp_path / "x.laz"):
+        las = laspy.read(path)
+        assert las.header.scales.tolist() == [1e-5] * 3
+        assert np.column_stack([las.x, las.y, las.z]).tolist() == [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]

@@ -5,6 +5,8 @@ live cloud's, and COPC (lod/copc_write.py), whose reader (lod/copc.py) decodes t
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..errors import GigapointWarning, counted, warn
@@ -146,25 +148,33 @@ def choose_point_format(attributes, has_color: bool = True) -> int:
 _INT32 = (-(2**31), 2**31 - 1)
 
 
+def power_of_ten_below(value: float) -> float:
+    """The power of ten at or below ``value`` (0.003048 -> 0.001; 0.01 -> 0.01)."""
+    exponent = math.floor(math.log10(value) + 1e-9)  # (log10(0.001) is -2.9999999999999996)
+    return 10.0**exponent if exponent >= 0 else 1 / 10.0**-exponent
+
+
 def default_step(lo, hi) -> float:
-    """The grid step for points that came without one (float positions): a millimetre, finer for
-    a cloud under 65.5 m across (at least 65 536 steps across it: a 10 cm object kept its shape,
-    not 100 mm-steps), and never below what float64 tells apart at its coordinates (2e-15 of
-    them: ~8 of its steps) or 1 nm. Points that floor does not tell apart (one point, equal
-    points) get the millimetre (or that floor, where coarser): their zero extent gave the floor
-    itself, 8.6e-9 at UTM coordinates, a scale other tools show as absurd."""
+    """The grid step for points that came without one (float positions): a power of ten (decimal
+    values of as many decimals are stored as they were: 3/65 536 gave a text file's 1.0 as
+    0.99998), the one at or below a millimetre, finer for a cloud under 65.5 m across (at least
+    65 536 steps across it: a 10 cm object kept its shape, not 100 mm-steps), and what float64
+    tells apart at its coordinates (2e-15 of them: ~8 of its steps) or 1 nm. Points that floor does
+    not tell apart (one point, equal points) get the millimetre (or that floor, where coarser):
+    their zero extent gave the floor itself, 8.6e-9 at UTM coordinates, a scale other tools show
+    as absurd."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     extent = float(np.max(hi - lo))
     floor = max(2e-15 * max(1.0, float(np.abs(lo).max()), float(np.abs(hi).max())), 1e-9)
-    return max(min(0.001, extent / 2**16) if extent > floor else 0.001, floor)  # (1e12 m: 0.002, float64's own steps)
+    return power_of_ten_below(max(min(0.001, extent / 2**16) if extent > floor else 0.001, floor))  # (1e12 m: 0.001)
 
 
 def las_grid(lo, hi, scale=None, offset=None, out=None) -> tuple[np.ndarray, np.ndarray]:
     """(scale, offset) per axis of 32-bit integers for points within [lo, hi]: the input's when
     both are given and the points fit on them; else ``scale`` (a grid the points lie on: from
     ``offset``, else from 0) or ``default_step``, with, per axis, the given offset where it holds
-    the points, else the grid line at or below ``lo``, else one centred on them (the whole int32
-    range). Coarser only where that range is too short; said, for output ``out``, where it
+    the points, else the grid line at or below ``lo`` (a whole number for a decimal step without
+    an offset), else one centred on them (the whole int32 range). Coarser only where that range is too short; said, for output ``out``, where it
     coarsens a given ``scale`` (the points then move by up to half the new step)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     base = np.zeros(3) if offset is None else np.asarray(offset, np.float64)
@@ -174,14 +184,27 @@ def las_grid(lo, hi, scale=None, offset=None, out=None) -> tuple[np.ndarray, np.
             return s, base
     s = np.broadcast_to(np.asarray(scale, np.float64), (3,)) if scale is not None else np.full(3, default_step(lo, hi))
     wide = np.maximum(s, (hi - lo) / (2**32 - 2**9))  # centred: half the span and half a step of rounding within 2**31 - 2 steps
-    if out is not None and scale is not None and np.any(wide > s):
-        old, new = (", ".join(f"{v:.6g}" for v in scales) for scales in (s, wide))
-        warn(f"{out}: the points span more than 32-bit integers hold at scale {old}: written at scale {new}, "
-             f"positions moved by up to {float(np.max(wide)) / 2:.3g}", GigapointWarning)  # fmt: skip
+    if out is not None and scale is not None:
+        warn_coarsened(out, s, wide)
     s = wide
-    from_lo, centred = base + np.floor((lo - base) / s) * s, base + np.round(((lo + hi) / 2 - base) / s) * s
+    if offset is None and all(v == power_of_ten_below(v) for v in s):  # a decimal step: from a whole number, exact in float64
+        unit = np.maximum(s, 1.0)  # (a multiple of the step: 1.0 at scale 1e-5 read back 1.0, not 0.99999 + 1e-5)
+        from_lo = np.floor(lo / unit) * unit
+    else:
+        from_lo = base + np.floor((lo - base) / s) * s
+    centred = base + np.round(((lo + hi) / 2 - base) / s) * s
     o = np.where(_fits_int32(lo, hi, s, from_lo), from_lo, centred)
     return s, o if offset is None else np.where(_fits_int32(lo, hi, s, base), base, o)  # (the axes the given offset holds keep it)
+
+
+def warn_coarsened(out, given, used) -> None:
+    """One line, naming output ``out``, where the scale ``used`` (per axis) is coarser than the
+    ``given`` one the inputs' points lie on: they then move by up to half its step."""
+    given, used = np.broadcast_to(np.asarray(given, np.float64), (3,)), np.asarray(used, np.float64)
+    if np.any(used > given):
+        old, new = (", ".join(f"{v:.6g}" for v in scales) for scales in (given, used))
+        warn(f"{out}: the points span more than 32-bit integers hold at scale {old}: written at scale {new}, "
+             f"positions moved by up to {float(np.max(used)) / 2:.3g}", GigapointWarning)  # fmt: skip
 
 
 def _fits_int32(lo, hi, s, o) -> np.ndarray:

@@ -41,6 +41,7 @@ from ..errors import GigapointWarning, InputError, counted, first_line, warn
 from .crs import crs_identity, crs_name, crs_units, file_crs, same_horizontal
 from .filters import PointFilter, may_move, placed_in, placed_over
 from .las import LasReader
+from .las_fields import las_grid, power_of_ten_below
 from .polygon import ClipPolygon, moved_polygon
 from .registry import reader_for
 
@@ -100,12 +101,6 @@ def _z_metres(crs) -> float | None:
     metres for a geographic one (its heights are ellipsoidal, in metres: feet to degrees keeps z
     in feet, which was said nothing of)."""
     return 1.0 if crs.is_geographic else _metres_across(crs)
-
-
-def power_of_ten_below(value: float) -> float:
-    """The power of ten at or below ``value`` (0.003048 -> 0.001; 0.01 -> 0.01)."""
-    exponent = math.floor(math.log10(value) + 1e-9)  # (log10(0.001) is -2.9999999999999996)
-    return 10.0**exponent if exponent >= 0 else 1 / 10.0**-exponent
 
 
 def _operation_areas(transformer) -> list | None:
@@ -413,8 +408,6 @@ def output_grid(files, reprojection: Reprojection):
     of theirs in the target CRS (``Reprojection.step``), a round offset below their headers' boxes
     transformed (of the files within gigapoint's reach); None where a file is no LAS file, or none is within it (a grid is then made from the points' bounds, a
     pass over them)."""
-    from .las_fields import las_grid
-
     if not all(isinstance(reader_for(f), LasReader) for f in files):
         return None
     boxes, steps = [], []

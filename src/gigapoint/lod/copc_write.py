@@ -32,6 +32,7 @@ from ..io.las_fields import (
     choose_point_format,
     extra_attributes,
     las_field_values,
+    warn_clipped,
 )
 from .copc import (
     COPC_HIERARCHY_RECORD,
@@ -96,16 +97,18 @@ def _vlr(user: bytes, record: int, data: bytes, description: str) -> bytes:
 
 
 class CopcWriter:
-    """Nodes -> a COPC file on the binary file object ``f`` (positioned at 0, seekable)."""
+    """Nodes -> a COPC file on the binary file object ``f`` (positioned at 0, seekable), the
+    output ``path`` (what its warnings name)."""
 
     def __init__(
-        self, f, *, scale, offset, cube_min, cube_edge: float, point_format: int = 7, wkt: str | None = None, spacing=None, extra=None
+        self, f, path, *, scale, offset, cube_min, cube_edge: float, point_format: int = 7, wkt: str | None = None, spacing=None, extra=None
     ):
         import lazrs
 
         if point_format not in POINT_DTYPES:
             raise ValueError(f"COPC point format must be 6, 7 or 8, got {point_format}")
-        self.f = f
+        self.f, self.path = f, path
+        self.clipped: dict = {}  # {attribute: values clipped to its LAS field}: said once, by finish
         self.lazrs = lazrs
         self.point_format = point_format
         self.extra = {str(k): np.dtype(v) for k, v in (extra or {}).items()}  # {name: dtype}: extra_attributes
@@ -160,12 +163,12 @@ class CopcWriter:
             )
         for name in ("intensity", "classification", "point_source_id", "user_data", "scan_angle_rank", "scan_angle"):
             if name in attributes:  # (scan_angle after scan_angle_rank: the finer one where both are given)
-                rec[LAS_FIELD_OF.get(name, name)] = las_field_values(name, attributes[name])
+                rec[LAS_FIELD_OF.get(name, name)] = las_field_values(name, attributes[name], self.clipped)
         for name, bit in FLAG_BITS.items():
             if name in attributes:
-                rec["flags"] |= las_field_values(name, attributes[name]).astype(np.uint8) << np.uint8(bit)
-        rn = las_field_values("return_number", np.asarray(attributes["return_number"], np.int64)) if "return_number" in attributes else None
-        nr = las_field_values("number_of_returns", np.asarray(attributes["number_of_returns"], np.int64)) if "number_of_returns" in attributes else None
+                rec["flags"] |= las_field_values(name, attributes[name], self.clipped).astype(np.uint8) << np.uint8(bit)
+        rn = las_field_values("return_number", np.asarray(attributes["return_number"], np.int64), self.clipped) if "return_number" in attributes else None
+        nr = las_field_values("number_of_returns", np.asarray(attributes["number_of_returns"], np.int64), self.clipped) if "number_of_returns" in attributes else None
         if rn is not None or nr is not None:
             rec["returns"] = (rn if rn is not None else 0) | ((nr if nr is not None else 0) << 4)
         if rn is not None:
@@ -178,7 +181,7 @@ class CopcWriter:
             rgb16 = np.asarray(rgb16)
             rec["red"], rec["green"], rec["blue"] = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
         if self.point_format == 8 and "nir" in attributes:
-            rec["nir"] = las_field_values("nir", attributes["nir"])
+            rec["nir"] = las_field_values("nir", attributes["nir"], self.clipped)
         for name in self.extra:
             if name in attributes:
                 rec[name] = attributes[name]
@@ -214,8 +217,10 @@ class CopcWriter:
         self._batch, self._batch_keys, self._batch_points = [], set(), 0
 
     def finish(self, page_level: int | None = None) -> dict:
-        """The chunk table, hierarchy EVLR, header and VLRs; returns {points, nodes, pages}."""
+        """The chunk table, hierarchy EVLR, header and VLRs; returns {points, nodes, pages}.
+        Attribute values clipped to their LAS field are said once a field (as io/write.py's LAS save)."""
         self._flush()
+        warn_clipped(self.path, self.clipped)
         f = self.f
         for key in list(self.entries):  # every ancestor has an entry, so that readers reach every node
             k = key
@@ -355,7 +360,7 @@ def write_copc(
     check_copc_output(path, overwrite)
     with atomic_open(path, durable=durable) as f:
         w = CopcWriter(
-            f, scale=scale, offset=offset, cube_min=cube_min, cube_edge=cube_edge, point_format=point_format, wkt=wkt, spacing=spacing,
+            f, path, scale=scale, offset=offset, cube_min=cube_min, cube_edge=cube_edge, point_format=point_format, wkt=wkt, spacing=spacing,
             extra=extra,
         )  # fmt: skip
         for key, xyz, rgb, attrs in nodes:

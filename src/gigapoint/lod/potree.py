@@ -311,10 +311,11 @@ PLACED = "potree.npy"  # a node set whose nodes the build placed in octree.bin: 
 PLACED_STATS = "potree_stats.json"  # ... and its fields' minimum and maximum, as written
 
 
-def potree_plan(st: dict) -> tuple[list, np.ndarray, np.ndarray]:
+def potree_plan(st: dict, out=None) -> tuple[list, np.ndarray, np.ndarray]:
     """(write_layout, scale, offset) of the Potree octree a conversion's state makes: rgb only
-    for sources with colours (``source_facts``' has_color, as the gigapoint and COPC writers)."""
-    scale, offset = output_grid(st, unsigned=True)
+    for sources with colours (``source_facts``' has_color, as the gigapoint and COPC writers);
+    ``out``: the output named where the inputs' scale must coarsen (said by the write phase alone)."""
+    scale, offset = output_grid(st, unsigned=True, out=out)
     has_color = bool((st.get("source") or {}).get("has_color", True))
     return write_layout({a: np.dtype(d) for a, d in (st.get("attributes") or {}).items()}, has_color), scale, offset
 
@@ -361,7 +362,7 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
     the number of nodes. Node sets the build placed in the octree.bin being built
     (``place_node_set``) are taken as they are; those kept in files (built on Dask workers) are
     placed now, in ``sources`` order, the build's: a single process's bytes."""
-    plan = potree_plan(st)  # the inputs' grid (a LAS file's 0.1 mm was cut to 1 mm), else a fine enough one (grid.py)
+    plan = potree_plan(st, out.path)  # the inputs' grid (a LAS file's 0.1 mm was cut to 1 mm), else a fine enough one (grid.py)
     layout, scale, offset = plan
     part = out.potree_octree_in_progress
     moved = not part.exists() and out.potree_octree.exists()  # a write phase resumed after the move: every set was placed
