@@ -144,11 +144,10 @@ def test_one_point_or_equal_points_save_on_a_millimetre_grid(tmp_path, copies):
 
 def test_one_point_far_out_saves_on_the_grid_float64_tells_apart(tmp_path):
     """A point at 1e12 m has no extent: it got the millimetre, though float64 tells no finer steps
-    than 2e-15 of its coordinates apart there (0.002): that floor, as for a cloud with an extent
-    (its power of ten at or below: 0.001, ~8 of float64's steps there)."""
+    than 2e-15 of its coordinates apart there (0.002): that floor, as for a cloud with an extent."""
     from gigapoint.io.las_fields import default_step
 
-    far = 0.001
+    far = 2e-15 * 1e12
     assert default_step([1e12, -1e12, 5.0], [1e12, -1e12, 5.0]) == far
     assert default_step([0, 0, 0], [0, 0, 0]) == 0.001  # (near 0: the millimetre)
     xyz = np.array([[1e12, -1e12, 5.0]])

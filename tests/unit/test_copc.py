@@ -677,7 +677,7 @@ def test_the_output_grid_keeps_the_inputs_and_fits_potrees_unsigned_integers():
     s, o = output_grid(wide, unsigned=True)
     assert np.all((np.array(wide["hi"]) - o) / s < 2**31 - 1) and np.all(o <= wide["lo"])
     assert default_step([0, 0, 0], [0.1, 0.1, 0.1]) == 1e-6 and default_step([0, 0, 0], [500, 1, 1]) == 0.001  # (0.1 / 2**16's power of ten)
-    assert default_step([1e11] * 3, [1e11 + 0.1] * 3) == 1e-4  # float64 tells no finer steps than 2e-15 * 1e11 apart there: its power of ten
+    assert default_step([1e11] * 3, [1e11 + 0.1] * 3) == 2e-15 * (1e11 + 0.1)  # float64 tells no finer steps apart there
     assert output_grid({"lo": [0, 0, 0], "hi": [1, 1, 1], "chunk_scale": [0.01] * 3})[0].tolist() == [0.01] * 3  # gp.demo's grid
 
 

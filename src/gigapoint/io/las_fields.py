@@ -158,15 +158,16 @@ def default_step(lo, hi) -> float:
     """The grid step for points that came without one (float positions): a power of ten (decimal
     values of as many decimals are stored as they were: 3/65 536 gave a text file's 1.0 as
     0.99998), the one at or below a millimetre, finer for a cloud under 65.5 m across (at least
-    65 536 steps across it: a 10 cm object kept its shape, not 100 mm-steps), and what float64
-    tells apart at its coordinates (2e-15 of them: ~8 of its steps) or 1 nm. Points that floor does
+    65 536 steps across it: a 10 cm object kept its shape, not 100 mm-steps); never below what float64
+    tells apart at its coordinates (2e-15 of them: ~8 of its steps; no power of ten where it binds) or 1 nm. Points that floor does
     not tell apart (one point, equal points) get the millimetre (or that floor, where coarser):
     their zero extent gave the floor itself, 8.6e-9 at UTM coordinates, a scale other tools show
     as absurd."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     extent = float(np.max(hi - lo))
     floor = max(2e-15 * max(1.0, float(np.abs(lo).max()), float(np.abs(hi).max())), 1e-9)
-    return power_of_ten_below(max(min(0.001, extent / 2**16) if extent > floor else 0.001, floor))  # (1e12 m: 0.001)
+    step = power_of_ten_below(min(0.001, extent / 2**16) if extent > floor else 0.001)
+    return max(step, floor)  # (the floor where it binds, 0.002 at 1e12 m: rounded down to 0.001 it was ~1.6 of float64's steps at 4e11)
 
 
 def las_grid(lo, hi, scale=None, offset=None, out=None) -> tuple[np.ndarray, np.ndarray]:
