@@ -142,6 +142,21 @@ def test_one_point_or_equal_points_save_on_a_millimetre_grid(tmp_path, copies):
     np.testing.assert_allclose(np.column_stack([las.x, las.y, las.z]), xyz, atol=0.0005, rtol=0)
 
 
+def test_a_plain_save_to_a_copc_name_is_refused_and_points_to_convert(tmp_path):
+    """save("x.copc.laz") wrote a plain LAZ (no COPC info VLR) under a COPC's name; refused now,
+    nothing written, naming gigapoint.convert, which writes the COPC."""
+    from gigapoint.errors import InputError
+
+    cloud = gp.from_arrays(np.c_[np.arange(5.0), np.zeros(5), np.zeros(5)])
+    out = tmp_path / "x.COPC.laz"
+    with pytest.raises(InputError) as err:
+        cloud.save(out)
+    assert str(err.value) == f"{out}: a COPC file is an octree, which save does not write; gigapoint.convert(cloud, {str(out)!r}) does"
+    assert not out.exists()
+    gp.convert(cloud, out, progress=False)
+    assert "copc" in [v.user_id for v in laspy.read(out).header.vlrs]
+
+
 def test_one_point_far_out_saves_on_the_grid_float64_tells_apart(tmp_path):
     """A point at 1e12 m has no extent: it got the millimetre, though float64 tells no finer steps
     than 2e-15 of its coordinates apart there (0.002): that floor, as for a cloud with an extent."""

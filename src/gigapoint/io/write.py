@@ -383,6 +383,8 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
     path = Path(path)
     if path.suffix.lower() not in POINT_FILE_SUFFIXES:
         raise InputError(f"{path}: save writes .las, .laz or .ply files, not {path.suffix or 'a name without a suffix'}")
+    if path.name.lower().endswith(".copc.laz"):  # (it wrote a plain LAZ under a COPC's name: no COPC reader opened it as one)
+        raise InputError(f"{path}: a COPC file is an octree, which save does not write; gigapoint.convert(cloud, {str(path)!r}) does")
     check_point_file_output(path, overwrite)
     has_color = cloud.version is not None or sources_have_color(cloud.source_files)  # (changed: set_colors may have given it colours)
     if has_color and not cloud.colors_exact:  # gp.open's colors="auto": written as held, up to 12/255 off the file's (as convert says)
