@@ -123,3 +123,24 @@ def test_a_small_cloud_far_from_the_origin_is_framed_as_at_the_origin(projection
         for view in ("auto", "top"):
             frame = gp.render_frame(one, gp.Camera.fit_cloud(one, width=32, height=24, projection=projection, view=view))
             assert frame.stats.visible_pixels > 0, (p, view)
+
+
+@pytest.mark.filterwarnings("error")  # ("no point is in view of the camera")
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+@pytest.mark.parametrize("view", ["top", "side", "front", "iso", "auto", (0.0, 45.0)])
+@pytest.mark.parametrize("where", [(3.0, 4.0, 5.0), (50.0, 50.0, 10.0)])
+def test_a_single_point_of_a_las_file_is_drawn_at_the_images_centre(tmp_path, view, projection, where):
+    """A one-point (or all-identical) cloud was framed 1e-6 of its coordinates across, finer than a
+    LAS cloud's batch grid (float32 cells) resolves: a blank image and "no point is in view"
+    (orthographic 'auto': the point at row 0). It is framed as a cube 1 unit from its centre."""
+    import laspy
+
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales, header.offsets = np.array([0.01] * 3), np.zeros(3)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = ([v] for v in where)
+    las.write(str(tmp_path / "one.las"))
+    cloud = gp.open(tmp_path / "one.las")
+    cam = gp.Camera.fit_cloud(cloud, view=view, width=64, height=36, projection=projection)
+    lit = np.argwhere(gp.render_frame(cloud, cam).index >= 0)
+    assert len(lit) == 1 and np.abs(lit[0] + 0.5 - (18, 32)).max() <= 1, lit

@@ -175,6 +175,24 @@ def test_cli_writes_the_orthophoto_its_world_file_and_the_dsm(cli, tmp_path, gri
     assert "no .prj written: the inputs name no CRS" in out and not list(tmp_path.glob("*.prj"))
 
 
+def test_cli_dsm_holds_each_pixels_highest_point_under_the_images_splats(cli, tmp_path, grid_npy):
+    """With the default adaptive splats the DSM took the splats' depths: heights in pixels no point
+    is in, and a neighbour's z where a splat covered a lower point. The image keeps its splats,
+    the same with --depth-out as without."""
+    path, xyz = grid_npy
+    rc, _, err = cli("render", path, "-o", tmp_path / "ortho.png", "--gsd", GSD, "--depth-out", tmp_path / "dsm.tif")
+    assert rc == 0, err
+    dsm = np.asarray(Image.open(tmp_path / "dsm.tif"))
+    col, row = pixel_of(read_world_file(tmp_path / "dsm.tfw"), xyz[:, 0], xyz[:, 1])
+    np.testing.assert_allclose(dsm[row, col], xyz[:, 2], rtol=0, atol=1e-5)
+    assert np.isnan(dsm).sum() == dsm.size - len(xyz)
+    rc, _, err = cli("render", path, "-o", tmp_path / "alone.png", "--gsd", GSD)
+    assert rc == 0, err
+    image = np.asarray(Image.open(tmp_path / "ortho.png"))
+    np.testing.assert_array_equal(image, np.asarray(Image.open(tmp_path / "alone.png")))
+    assert (image[..., 3] > 0).sum() > 2 * len(xyz)  # splats
+
+
 def test_pixels_no_point_reached_are_transparent_and_filled_ones_opaque(cli, tmp_path, grid_npy):
     """A map's empty pixels are no colour (alpha 0: GIS software and --colorize read an opaque
     background as black imagery); --fill-nodata's filled pixels take their neighbour's, opaque."""

@@ -143,3 +143,69 @@ def test_a_count_whose_division_overflows_is_infinite_and_said_so():
     assert count_or_inf(lambda: math.floor(np.float64(100.0) / 5e-324) + 1) == math.inf  # (numpy's overflow warning too: pytest's -W error finds it)
     assert count_or_inf(lambda: math.floor(1e308 * 10 - 1e308 * 10)) == math.inf  # (inf - inf: nan)
     assert [count_text(n) for n in (2000, 1.18e303, math.inf)] == ["2,000", "1.18e+303", "inf"]
+
+
+def binned_max(camera, xyz):
+    """(H, W) the highest z of ``xyz`` floor-binned into ``camera``'s pixels by its world file, NaN
+    where none; and the pixels (with the one across the edge) of points within 1e-3 pixel of an
+    inner pixel edge, which float32 may put on either side (guide section 5)."""
+    size, _, _, _, x0, y0 = camera.world_file()
+    px, py = (xyz[:, 0] - (x0 - size / 2)) / size, ((y0 + size / 2) - xyz[:, 1]) / size
+    col, row = np.floor(px).astype(int), np.floor(py).astype(int)
+    highest = np.full((camera.height, camera.width), -np.inf)
+    np.maximum.at(highest, (row, col), xyz[:, 2])
+    on_edge = np.zeros(highest.shape, bool)
+    near = (np.abs(px - np.round(px)) < 1e-3) | (np.abs(py - np.round(py)) < 1e-3)
+    for dr, dc in ((0, 0), (-1, 0), (0, -1), (-1, -1)):
+        on_edge[np.maximum(row[near] + dr, 0), np.maximum(col[near] + dc, 0)] = True
+    return np.where(np.isfinite(highest), highest, np.nan), on_edge
+
+
+def sparse_cloud(seed=4):
+    """A few hundred points scattered over a 60 x 40 field of 1-unit pixels at a projected CRS's
+    size of numbers, several to some pixels, most pixels empty, none within 0.05 of a pixel edge;
+    heights 0..100 apart."""
+    rng = np.random.default_rng(seed)
+    xy = np.array([636_100.0, 849_200.0]) + rng.integers(0, [60, 40], (400, 2)) + rng.uniform(0.05, 0.95, (400, 2))
+    return np.column_stack([xy, rng.uniform(300, 400, 400)])
+
+
+def test_heights_are_each_pixels_highest_point_whatever_the_images_point_size():
+    """The default settings draw adaptive splats: their depths gave the DSM heights in 3x the
+    pixels points fall in, and a neighbour's z in pixels holding points (autzen: 358,509 pixels
+    of heights for 103,939 holding a point, some 108 ft off). The image keeps its splats."""
+    xyz = sparse_cloud()
+    for settings in ({}, {"point_size": 4}, {"size_mode": "fixed", "point_size": 1}):
+        result = gp.orthophoto(gp.from_arrays(xyz), 1.0, **settings)
+        expected, on_edge = binned_max(result.camera, xyz)
+        assert not on_edge.any()
+        np.testing.assert_allclose(result.heights, expected, rtol=0, atol=1e-4, err_msg=str(settings))  # float32 of 400: 3e-5
+        drawn = (result.image[..., 3] > 0).sum()
+        assert drawn == np.isfinite(expected).sum() if settings.get("size_mode") == "fixed" else drawn > 2 * np.isfinite(expected).sum()
+
+
+def test_autzens_dsm_is_each_pixels_highest_point(autzen_path):
+    import laspy
+
+    las = laspy.read(autzen_path)
+    xyz = np.column_stack([las.x, las.y, las.z])
+    heights = gp.orthophoto(autzen_path, 1.0).heights
+    expected, on_edge = binned_max(gp.Camera.top_down((xyz.min(axis=0), xyz.max(axis=0)), 1.0), xyz)
+    assert heights.shape == expected.shape == (563, 1179)
+    np.testing.assert_allclose(heights[~on_edge], expected[~on_edge], rtol=0, atol=1e-3)  # float32 of ~500 ft: 3e-5
+    assert np.isfinite(heights).sum() == 103_939 and on_edge.sum() < 10_000  # (points on whole feet: 1 in 100 a side)
+
+
+def test_the_documented_surface_recipe_gives_each_pixels_highest_point():
+    """README and the guide's `cam.heights(gp.render_frame(cloud, cam, ...).depth)` for a
+    top_down camera: as first written (the default settings: adaptive splats, 10- and 20-bit
+    positions) heights were a neighbour's and up to 0.0024 off."""
+    xyz = sparse_cloud(seed=5)
+    cloud = gp.from_arrays(xyz)
+    cam = gp.Camera.top_down(cloud.bounds, gsd=0.5)
+    heights = cam.heights(gp.render_frame(cloud, cam, size_mode="fixed", adaptive_precision=False).depth)
+    expected, on_edge = binned_max(cam, xyz)
+    assert not on_edge.any()
+    np.testing.assert_allclose(heights, expected, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(heights, gp.orthophoto(cloud, 0.5).heights, rtol=0, atol=0)
+    assert not np.allclose(cam.heights(gp.render_frame(cloud, cam).depth), expected, rtol=0, atol=1e-4, equal_nan=True)  # (the old recipe)

@@ -369,7 +369,11 @@ def render(
         frame = gp.render_frame(cloud, cam, settings)
     compiled = compiling.compiled_seconds() - compiled
     surface = gsd is not None and (depth_out is not None or contours is not None)
-    image, heights = frame.image, (cam.heights(frame.depth) if surface else None)
+    from ..render.surface import surface_heights  # (not at import: the renderer's numba kernels)
+
+    with options_named():  # (the highest point's z in each pixel: drawn again where the image's points are splats)
+        heights = surface_heights(cloud, cam, settings, frame) if surface else None
+    image = frame.image
     if gsd is not None:  # a map: no data is no colour (--fill-nodata's filled pixels take their neighbour's alpha)
         image = map_image(image, frame.index < 0)
     if fill_nodata is not None:

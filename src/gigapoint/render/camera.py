@@ -157,6 +157,11 @@ def _box(bounds) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(_vec3(lo, "bounds min")), np.asarray(_vec3(hi, "bounds max"))
 
 
+def _corners(lo, hi) -> np.ndarray:
+    """(8, 3) the corners of the box from ``lo`` to ``hi``."""
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
 def _round_up(v: float) -> float:
     """``v`` rounded up to three significant digits (a suggested gsd that still fits)."""
     step = 10.0 ** (math.floor(math.log10(v)) - 2)
@@ -281,7 +286,7 @@ class Camera:
         _check_keywords("fit", kw, FIT_KEYWORDS)
         width, height = image_side("width", width), image_side("height", height)  # before width / height divides
         lo, hi = _box(bounds)
-        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        box = _corners(lo, hi)
         if points is not None:
             points = np.asarray(points, np.float64).reshape(-1, 3)
             points = points[np.all(np.isfinite(points), axis=1)]
@@ -305,12 +310,19 @@ class Camera:
         if points is not None:
             lo, hi = np.quantile(points, trim, axis=0), np.quantile(points, 1.0 - trim, axis=0)
         center = (lo + hi) / 2
-        # a single point (or identical ones) still gets a camera float64 can place: 1e-6 of the
-        # coordinates' size; a cloud more than 1e-14 of them across (~45 float64 steps) is framed
-        # by its own size (that floor framed 0.1 m at 1e9 from 1 km away, a few pixels), at least 1 µm
+        # a cloud more than 1e-14 of its coordinates' size across (~45 float64 steps) is framed by
+        # its own size (a floor of 1e-6 of the coordinates framed 0.1 m at 1e9 from 1 km away, a few
+        # pixels), at least 1 µm
         size = max(1.0, float(np.abs(center).max()))
         half = float(np.linalg.norm(hi - lo)) / 2
-        radius = max(half, 1e-6) if half > 1e-14 * size else 1e-6 * size
+        radius = max(half, 1e-6)
+        if half <= 1e-14 * size:
+            # a single point (or identical ones): framed as a cube 1 unit (1e-6 of the coordinates'
+            # size, at least) from its centre to its corners, the point at the target: the image's
+            # centre. A box of 1e-6 of the coordinates was finer than a batch's float32 grid
+            # resolves: a blank image
+            radius = max(1.0, 1e-6 * size)
+            box, points, trim, recenter = _corners(center - radius / math.sqrt(3), center + radius / math.sqrt(3)), None, 0.0, False
         aspect = width / height
         # orientation first (distance 1), then the distance at which every corner fits
         probe = cls.orbit(center, yaw, pitch, 1.0, fov=fov, width=width, height=height)

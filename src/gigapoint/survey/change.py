@@ -65,14 +65,13 @@ from ..lod.query import deepest_level, is_octree, points_meeting
 from ..lod.reader import cloud_crs_units
 from ..lod.store import OctreeCloud
 from ..lod.voxel_octree import VoxelOctree
-from ..render import Camera, RenderSettings, render_frame
+from ..render import Camera
 from ..render.colors import ramp_image
 from ..render.georef import write_map
 from ..render.raster_fill import check_max_distance, fill_heights
+from ..render.surface import surface_heights
 from .raster_grid import RasterGrid
 
-#: a surface model's drawing: each point in its exact pixel (no splat reaches a neighbour), 30-bit positions
-SURFACE_SETTINGS = {"size_mode": "fixed", "point_size": 1, "adaptive_precision": False}
 PREVIEW_COLORMAP = "rdbu"  # diverging, white at 0: red where ground was cut, blue where it was filled
 PREVIEW_PERCENTILE = 98.0  # of |dz|: the preview's default range (a few outliers do not wash it out)
 #: an octree's levels read for a surface: down to the first whose point spacing is at most this share of a pixel
@@ -284,7 +283,7 @@ def surface(cloud, camera: Camera, fill_nodata=None, full: bool = False) -> np.n
     if is_octree(cloud):
         heights = _octree_heights(cloud, camera, full)
     else:
-        heights = camera.heights(render_frame(cloud, camera, RenderSettings().replace(**SURFACE_SETTINGS)).depth)
+        heights = surface_heights(cloud, camera)
     return heights if fill_nodata is None else fill_heights(heights, None if fill_nodata == "all" else fill_nodata)
 
 

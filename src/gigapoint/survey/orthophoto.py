@@ -21,6 +21,7 @@ from ..render import Camera, RenderSettings, render_frame
 from ..render.georef import GEOTIFF_SUFFIXES, map_image, write_map
 from ..render.image_files import IMAGE_SUFFIXES, check_output
 from ..render.raster_fill import check_max_distance, fill_map
+from ..render.surface import surface_heights
 
 
 @dataclass(frozen=True)
@@ -60,7 +61,8 @@ def orthophoto(source, gsd, out=None, dsm=None, fill_nodata=None, classes=None, 
     nearest colour (``render --fill-nodata``; needs scipy). ``classes``/``drop_classes``/``clip``/
     ``clip_polygon``: only those points read (as ``gigapoint.open``). Settings as ``render``
     takes them (``settings`` and/or keywords: ``color_mode="elevation"``); positions are drawn at
-    full precision whatever they say (exact pixels and heights)."""
+    full precision whatever they say (exact pixels), and the heights are each pixel's highest
+    point's whatever size they give the points (``render.surface``: splats are drawn only in the image)."""
     check_switch("overwrite", overwrite, "orthophoto")
     if not (is_real(gsd) and gsd > 0):
         raise InputError(f"orthophoto: gsd must be a number > 0 (cloud units per pixel), got {number_text(gsd)}")
@@ -80,9 +82,11 @@ def orthophoto(source, gsd, out=None, dsm=None, fill_nodata=None, classes=None, 
         camera = Camera.top_down(cloud.bounds, gsd)
     except CameraError as exc:
         raise CameraError(f"orthophoto: gsd: {exc}") from None
-    frame = render_frame(cloud, camera, settings.replace(adaptive_precision=False))  # 30-bit positions: exact pixels and heights
+    settings = settings.replace(adaptive_precision=False)  # 30-bit positions: exact pixels
+    frame = render_frame(cloud, camera, settings)
     distance = None if fill_nodata in (None, "all") else fill_nodata
-    image, heights = map_image(frame.image, frame.index < 0), camera.heights(frame.depth)  # (--fill-nodata's colours opaque again)
+    # (--fill-nodata's colours opaque again); the heights each pixel's highest point's, whatever splats the image draws
+    image, heights = map_image(frame.image, frame.index < 0), surface_heights(cloud, camera, settings, frame)
     if fill_nodata is not None:
         image, heights = fill_map(image, frame.index < 0, heights, distance)
     crs, units = cloud_crs_units(cloud)
