@@ -17,7 +17,7 @@ from test_geo_coords import UTM10_NAVD88_WKT1, UTM11_NAVD88_WKT1, without_pyproj
 import gigapoint as gp
 from gigapoint.errors import GigapointError, InputError
 
-AUTZEN = "/work/shared/data/autzen_trim.laz"
+AUTZEN = str(Path(__file__).resolve().parents[2].parent / "shared" / "data" / "autzen_trim.laz")  # (../shared beside the clone)
 ORIGIN = (500_000.0, 4_000_000.0)  # a UTM-sized corner, on every grid below
 SPACING = 0.2  # of the synthetic surveys' points, at cell centres: 0.1, 0.3, ...
 BOX = (10.0, 5.0, 10.0, 20.0, 3.0)  # x, y (from ORIGIN), width, length, height: 600 units³ of fill

@@ -383,6 +383,7 @@ def test_a_geojson_dicts_placement_refusals_start_with_the_operation_as_its_ring
     kept = point_filter(clip_polygon=lonlat, where="convert").polygon
     assert kept.named == "convert: the GeoJSON geometry" and kept.as_spec()["source"] == "the GeoJSON geometry"
     assert kept.describe() == "clip polygon the GeoJSON geometry (3 vertices)"
+    assert PointFilter.from_spec(point_filter(clip_polygon=lonlat, where="convert").as_spec()).polygon.named == kept.named  # (a Dask task's copy)
 
 
 def test_a_geojson_naming_another_crs_than_the_files_is_warned_of_without_pyproj(tmp_path, monkeypatch):

@@ -142,17 +142,23 @@ def test_one_point_or_equal_points_save_on_a_millimetre_grid(tmp_path, copies):
     np.testing.assert_allclose(np.column_stack([las.x, las.y, las.z]), xyz, atol=0.0005, rtol=0)
 
 
-def test_a_plain_save_to_a_copc_name_is_refused_and_points_to_convert(tmp_path):
-    """save("x.copc.laz") wrote a plain LAZ (no COPC info VLR) under a COPC's name; refused now,
-    nothing written, naming gigapoint.convert, which writes the COPC."""
+def test_a_plain_save_to_a_copc_name_is_refused_and_points_to_convert(tmp_path, autzen_path):
+    """save("x.copc.laz") wrote a plain LAZ (no COPC info VLR) under a COPC's name, as did
+    classify_noise and height_above_ground; refused now, nothing written, naming gigapoint.convert,
+    which writes the COPC."""
     from gigapoint.errors import InputError
 
     cloud = gp.from_arrays(np.c_[np.arange(5.0), np.zeros(5), np.zeros(5)])
     out = tmp_path / "x.COPC.laz"
     with pytest.raises(InputError) as err:
         cloud.save(out)
-    assert str(err.value) == f"{out}: a COPC file is an octree, which save does not write; gigapoint.convert(cloud, {str(out)!r}) does"
+    refused = f"{out}: a COPC file is an octree, not a plain LAZ file: name it .laz, or write the COPC with gigapoint.convert(..., {str(out)!r})"
+    assert str(err.value) == refused
     assert not out.exists()
+    for classify in (gp.classify_noise, gp.height_above_ground):  # (their plain LAZ under a COPC's name too)
+        with pytest.raises(InputError) as err:
+            classify(autzen_path, out)
+        assert str(err.value) == refused and not out.exists()
     gp.convert(cloud, out, progress=False)
     assert "copc" in [v.user_id for v in laspy.read(out).header.vlrs]
 

@@ -6,6 +6,7 @@ the cloud's CRS and/or drawn onto the orthophoto where the GeoJSON's lines run."
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ from PIL import Image
 from gigapoint.errors import GigapointError
 from gigapoint.render.contours import LINE_RGB, contour_lines, contours_geojson, draw_contours, write_contours
 
-AUTZEN = "/work/shared/data/autzen_trim.laz"
+AUTZEN = str(Path(__file__).resolve().parents[2].parent / "shared" / "data" / "autzen_trim.laz")  # (../shared beside the clone)
 SIZE = 2.0  # the grid's pixel size
 WORLD_FILE = (SIZE, 0.0, 0.0, -SIZE, 1001.0, 2079.0)  # pixel (row, col)'s centre: x = 1001 + 2 col, y = 2079 - 2 row
 ROWS, COLS = np.mgrid[0:60, 0:80]

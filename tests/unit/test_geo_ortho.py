@@ -18,7 +18,7 @@ from gigapoint.errors import CameraError, GigapointError
 from gigapoint.io.las import read_las_header
 from gigapoint.render.camera import MAX_IMAGE_SIDE
 
-AUTZEN = "/work/shared/data/autzen_trim.laz"
+AUTZEN = str(Path(__file__).resolve().parents[2].parent / "shared" / "data" / "autzen_trim.laz")  # (../shared beside the clone)
 AUTZEN_COPC = Path(__file__).parent / "data" / "pdal_ept" / "autzen_clip_native.copc.laz"  # PDAL's, in a compound CRS
 GSD = 0.5
 ORIGIN = np.array([637_000.0, 851_000.5, 100.0])  # a projected CRS's size of numbers, on the 0.5 grid

@@ -5,6 +5,7 @@ with the nearest colour."""
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from PIL import Image
 from gigapoint.errors import GigapointError
 from gigapoint.render.raster_fill import fill_colors, fill_everywhere, fill_heights
 
-AUTZEN = "/work/shared/data/autzen_trim.laz"
+AUTZEN = str(Path(__file__).resolve().parents[2].parent / "shared" / "data" / "autzen_trim.laz")  # (../shared beside the clone)
 ROWS, COLS = np.mgrid[0:60, 0:80]
 PLANE = (0.3 * COLS - 0.7 * ROWS + 112.5).astype(np.float32)  # z = a x + b y + c on the pixel grid
 

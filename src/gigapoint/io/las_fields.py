@@ -156,8 +156,7 @@ def power_of_ten_below(value: float) -> float:
 
 def default_step(lo, hi) -> float:
     """The grid step for points that came without one (float positions): a power of ten (decimal
-    values of as many decimals are stored as they were: 3/65 536 gave a text file's 1.0 as
-    0.99998), the one at or below a millimetre, finer for a cloud under 65.5 m across (at least
+    values of as many decimals lie on the grid: 3/65 536 stored a text file's 1.0 as 0.99998), the one at or below a millimetre, finer for a cloud under 65.5 m across (at least
     65 536 steps across it: a 10 cm object kept its shape, not 100 mm-steps); never below what float64
     tells apart at its coordinates (2e-15 of them: ~8 of its steps; no power of ten where it binds) or 1 nm. Points that floor does
     not tell apart (one point, equal points) get the millimetre (or that floor, where coarser):

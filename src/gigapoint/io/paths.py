@@ -349,4 +349,7 @@ def scan_angles_differ(files) -> bool:
     return len(las) > 1 and len({read_las_header(f, salvage=True).point_format >= 6 for f in las}) == 2
 
 
-#: The EPSG code a WKT CRS ends with (WKT1 AUTHORITY, WKT2 ID): the whole CRS's, not a part's
+def is_copc_name(out) -> bool:
+    """Whether ``out`` is named as a COPC file (``*.copc.laz``): what a conversion (or a live
+    cloud's save) without a format writes as COPC, and a plain point file's writer refuses."""
+    return out is not None and Path(out).name.lower().endswith(".copc.laz")

@@ -112,11 +112,14 @@ class ClipPolygon:
         return f"clip polygon {self.source} ({', '.join(parts)})"
 
     def as_spec(self) -> dict:
-        """A GeoJSON MultiPolygon (with ``source``, ``epsg`` and any ``moved_from``): JSON-able, read back by ``clip_polygon_of``."""
+        """A GeoJSON MultiPolygon (with ``source``, ``epsg``, any ``moved_from`` and a ``named`` other
+    than the source): JSON-able, read back by ``clip_polygon_of``."""
         closed = [[[*map(list, ring.tolist()), list(ring[0].tolist())] for ring in polygon] for polygon in self.polygons]
         spec = {"type": "MultiPolygon", "coordinates": closed, "source": self.source, "epsg": self.epsg}
         if self.moved_from is not None:  # (only where moved: a conversion's fingerprint without is as before)
             spec["moved_from"] = self.moved_from
+        if self.named != self.source:  # (a bare dict's caller label: a Dask task's refusals start 'convert: ' too)
+            spec["named"] = self.named
         return spec
 
     def buckets(self) -> tuple[np.ndarray, np.ndarray]:
@@ -169,10 +172,12 @@ def clip_polygon_of(value, label: str, unnamed: str = UNNAMED_GEOMETRY) -> ClipP
     if isinstance(value, ClipPolygon):
         return value
     if isinstance(value, dict):
-        if isinstance(value.get("source"), str):
-            return _geojson_polygon(value, value["source"], label)
-        polygon = _geojson_polygon(value, UNNAMED_GEOMETRY, label)
-        polygon.named = unnamed
+        source = value["source"] if isinstance(value.get("source"), str) else UNNAMED_GEOMETRY
+        polygon = _geojson_polygon(value, source, label)
+        if isinstance(value.get("named"), str):  # (as_spec's: a Dask task's copy names it as its caller did)
+            polygon.named = value["named"]
+        elif source == UNNAMED_GEOMETRY:
+            polygon.named = unnamed
         return polygon
     if not isinstance(value, (str, os.PathLike)):
         raise InputError(f"{label}: a clip polygon is a GeoJSON or WKT file, or WKT text (POLYGON ((x y, ...)))")
@@ -418,7 +423,7 @@ def moved_polygon(polygon: ClipPolygon, source, target, tolerance: float | None 
     if same:
         return ClipPolygon(polygon.polygons, polygon.source, None, polygon.names, polygon.features, came_from, polygon.named)
     move = pyproj.Transformer.from_crs(source, target, always_xy=True)
-    moved = [[_moved_ring(ring, move, tolerance, polygon.source, target.name) for ring in rings] for rings in polygon.polygons]
+    moved = [[_moved_ring(ring, move, tolerance, polygon.named, target.name) for ring in rings] for rings in polygon.polygons]
     return ClipPolygon(moved, polygon.source, None, polygon.names, polygon.features, came_from, polygon.named)
 
 

@@ -426,4 +426,4 @@ def output_grid(files, reprojection: Reprojection):
     return las_grid(lo, hi, step, round_offset(lo, step))
 
 
-__all__ = ["Reprojection", "output_grid", "parse_crs", "power_of_ten_below", "round_offset"]
+__all__ = ["Reprojection", "output_grid", "parse_crs", "round_offset"]

@@ -24,6 +24,7 @@ from ..errors import GigapointWarning, InputError, first_line, warn
 from .crs import crs_name, crs_wkt, first_named_crs, own_epsg
 from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, read_las_header, vlrs_crs, wkt_of
 from .las_fields import LAS_FIELD_OF, choose_point_format, extra_attributes, field_attributes, las_field_values, las_grid, warn_clipped
+from .paths import is_copc_name
 from .ply import PLY_CRS_COMMENT
 from .registry import reader_for
 
@@ -41,6 +42,8 @@ def check_point_file_output(path: Path, overwrite: bool) -> None:
     existing file without ``overwrite``, a path through a file, a folder not writable. Folders
     missing on the way are made as it is written (``write_points``), as they are for an octree's
     folder or a COPC file: save("out/t.copc.laz") made out/, save("out/t.laz") refused it."""
+    if is_copc_name(path):  # (save, classify_noise, ... wrote a plain LAZ under a COPC's name: no COPC reader opened it as one)
+        raise InputError(f"{path}: a COPC file is an octree, not a plain LAZ file: name it .laz, or write the COPC with gigapoint.convert(..., {str(path)!r})")
     suffix = path.suffix.lower()  # (named where it is one written: a folder 'out' was "not a  file")
     what = f"a {suffix[1:].upper()} file" if suffix in POINT_FILE_SUFFIXES else "a point file"
     refuse(path, output_file_refusal(path, overwrite, f"{what}; not replaced"), InputError)
@@ -383,8 +386,6 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
     path = Path(path)
     if path.suffix.lower() not in POINT_FILE_SUFFIXES:
         raise InputError(f"{path}: save writes .las, .laz or .ply files, not {path.suffix or 'a name without a suffix'}")
-    if path.name.lower().endswith(".copc.laz"):  # (it wrote a plain LAZ under a COPC's name: no COPC reader opened it as one)
-        raise InputError(f"{path}: a COPC file is an octree, which save does not write; gigapoint.convert(cloud, {str(path)!r}) does")
     check_point_file_output(path, overwrite)
     has_color = cloud.version is not None or sources_have_color(cloud.source_files)  # (changed: set_colors may have given it colours)
     if has_color and not cloud.colors_exact:  # gp.open's colors="auto": written as held, up to 12/255 off the file's (as convert says)

@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.http import as_url, last_name, shown_url
 from ..io.las import read_las_header
-from ..io.paths import file_url_path
+from ..io.paths import file_url_path, is_copc_name
 from .octree_dir import POTREE_HIERARCHY, POTREE_META, POTREE_OCTREE, RESUME_HINT, OctreeDir
 
 # --------------------------------------------------------------------------- COPC's head (copc.py)
@@ -155,12 +155,6 @@ def ept_location(path) -> str | Path | None:
 
 
 # --------------------------------------------------------------------------- a COPC output's names (copc_write.py)
-
-
-def is_copc_name(out) -> bool:
-    """Whether ``out`` is named as a COPC file (``*.copc.laz``): what a conversion (or a live
-    cloud's save) without a format writes as COPC."""
-    return out is not None and Path(out).name.lower().endswith(".copc.laz")
 
 
 def work_dir(out) -> Path:
