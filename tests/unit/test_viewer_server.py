@@ -815,3 +815,57 @@ def test_a_port_in_use_names_the_keywords_and_the_options(cloud, cli):
             gigapoint.Viewer(cloud, port=port, display=False)
         rc, out, err = cli("view", "--demo", "1000", "--port", port, "--no-browser")
         assert (rc, out, err) == (1, "", f"error: --host 127.0.0.1 --port {port}: cannot listen there (Address already in use)\n")
+
+
+def test_a_port_in_use_is_refused_before_any_point_is_read(cli, monkeypatch):
+    """`view --demo 5000000 --no-progressive --port TAKEN` read the whole cloud (16.8 s) before it
+    said the port was in use, and gp.Viewer(path, port=TAKEN) read the file first too: the socket
+    is bound first, with the same one-line error."""
+    import socket
+
+    from gigapoint.cli import view_cmd
+    from gigapoint.viewer import jupyter
+
+    read = []
+    monkeypatch.setattr(view_cmd, "open_files", lambda inputs, *args, **kwargs: read.append(inputs))
+    monkeypatch.setattr(jupyter, "_as_cloud", read.append)
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        with pytest.raises(gigapoint.GigapointError, match=f"^host='127.0.0.1', port={port}: cannot listen there \\(Address already in use\\)$"):
+            gigapoint.Viewer("big.laz", port=port, display=False)
+        rc, out, err = cli("view", "big.laz", "--port", port, "--no-browser")
+        assert (rc, out, err) == (1, "", f"error: --host 127.0.0.1 --port {port}: cannot listen there (Address already in use)\n")
+    assert read == []
+
+
+def test_the_start_up_line_says_a_progressive_load_goes_on(cli, monkeypatch):
+    """A progressive load (by default of inputs above the point budget) was said as "big.laz,
+    250,000 points" (or "0 points"): the points in so far, as though they were the file's."""
+    from gigapoint.lod.progressive import ProgressiveOctree
+    from gigapoint.lod.progressive import loader as L
+
+    go = threading.Event()
+    chunks = L.Loader._chunks
+
+    def held_after_the_first(self):  # the rest of the points come once the start-up line is said
+        made = chunks(self)
+        yield next(made)
+        go.wait(60)
+        yield from made
+
+    def serve_until_loaded(self):  # instead of serving until Ctrl+C
+        go.set()
+        if isinstance(self.core.cloud, ProgressiveOctree):
+            self.core.cloud.wait(60)
+        self.close()
+
+    monkeypatch.setattr(L, "DECODE_CHUNK", 400)
+    monkeypatch.setattr(L.Loader, "_chunks", held_after_the_first)
+    monkeypatch.setattr(ViewerServer, "serve_forever", serve_until_loaded)
+    rc, _, err = cli("view", "--demo", 1000, "--progressive", "--no-browser")
+    # (0 where the first chunk took over the 5 s the start-up waits for it: numba compiling on a busy machine)
+    assert rc == 0 and re.search(r"^gigapoint viewer: demo\(1,000\), (0|400) of 1,000 points loaded so far \(loading\)$", err, re.MULTILINE), err
+    rc, _, err = cli("view", "--demo", 1000, "--no-browser")  # read whole: as before
+    assert rc == 0 and "gigapoint viewer: demo(1,000), 1,000 points\n" in err, err

@@ -229,6 +229,19 @@ def test_a_polygon_off_the_data_says_so_in_the_result(client):
     assert result["error"] == "the measured polygon: no point of pile lies in its box x 499.5..600.5, y 499.5..600.5"  # (two pixels of 0.25 beyond it)
 
 
+def test_a_polygon_of_absurd_vertices_is_named_as_measured_not_as_geojson(client):
+    """Its vertex error named "the GeoJSON geometry", which the user never gave: the viewer's
+    polygon is named as every other volume message names it."""
+    c, _ = client
+    with c.websocket_connect("/ws?w=120&h=90") as ws:
+        receive(ws, reply("hello"))
+        ws.send_json({"type": "measure", "action": "restore", "points": [[-1e13, -1e13, 0], [1e13, -1e13, 0], [1e13, 1e13, 0]], "closed": True})
+        receive(ws, reply("measure"))
+        ws.send_json({"type": "volume"})
+        result = receive(ws, reply("volume_result"))
+    assert result["error"] == "volume: the measured polygon: a polygon vertex lies beyond ±1e+12 ([-10000000000000.0, -10000000000000.0]): no point can be there"
+
+
 def test_a_toe_beyond_the_data_is_warned_of_in_the_result_not_on_the_servers_stderr(client, capfd, recwarn):
     """gp.volume warns of a pile whose pixels are more than 1 % empty: issued on the volume's
     thread, that warning went to the server's terminal, once per request, and the panel said only

@@ -66,13 +66,20 @@ def check_live_options(keep: int, decay: float | None, rate: float | None) -> No
         raise GigapointError(f"--rate must be > 0, got {number_text(rate)}")
 
 
-def serve_at(cloud, host: str, port: int, **options):
-    """A ViewerServer of ``cloud``; an address it cannot listen on said as the options typed
-    (viewer/server.py says gp.Viewer's keywords: ``host='::1', port=80: cannot listen there``)."""
-    from ..viewer.server import ViewerServer
+def listen_at(host: str, port: int):
+    """The viewer's listening socket, made before the cloud is read; an address it cannot listen on
+    said as the options typed (viewer/server.py says gp.Viewer's keywords: ``host='::1', port=80: cannot listen there``)."""
+    from ..viewer.server import listening_socket
     from .settings_opts import named_option
 
     try:
-        return ViewerServer(cloud, host=host, port=port, **options)
+        return listening_socket(host, port)
     except GigapointError as exc:
         raise named_option(exc, {f"host={host!r}, port={port!r}": f"--host {host} --port {port}"}) from None
+
+
+def serve_at(cloud, host: str, port: int, sock=None, **options):
+    """A ViewerServer of ``cloud`` on ``sock`` (``listen_at``'s; made here when None)."""
+    from ..viewer.server import ViewerServer
+
+    return ViewerServer(cloud, host=host, port=port, sock=sock if sock is not None else listen_at(host, port), **options)

@@ -54,6 +54,52 @@ def _report_load(cloud) -> None:
         threading.Thread(target=_report_load_error, args=(cloud,), name="gigapoint-load-report", daemon=True).start()
 
 
+def _open_cloud(paths, demo, options, progressive, recursive, point_filter, settings):
+    """The cloud viewed: --demo's or the files' (a progressive octree once its first points are in)."""
+    import gigapoint
+
+    from ..lod.progressive import ProgressiveOctree
+    from ..render.settings import RenderSettings
+    from ..viewer.classes import refusal
+
+    budget = RenderSettings().point_budget
+    if demo is not None:
+        cloud = gigapoint.demo(demo, progressive=progressive if progressive is not None else demo > budget and not options, **options)
+    else:
+        from ..lod import OctreeDir
+        from ..lod.preview import wait_for_preview
+
+        if len(paths) == 1 and OctreeDir(paths[0]).awaiting_preview:  # `convert` was started a moment ago
+            print(f"gigapoint viewer: waiting for the first preview of the conversion into {paths[0]} ...", file=sys.stderr)
+            wait_for_preview(paths[0])
+        cloud = open_files(subfolders_read(paths, recursive), budget, progressive, options, progress=False, point_filter=point_filter)  # big: shown while it loads
+    if isinstance(cloud, ProgressiveOctree):  # a first slice of points, so that the first view frames them
+        if settings.hidden_classes:  # (and its attributes, none before its first points, say whether classes can hide)
+            cloud.wait_first_points()
+        deadline = time.monotonic() + 5.0
+        while cloud.n_points == 0 and cloud.loading and time.monotonic() < deadline:
+            time.sleep(0.02)
+        if cloud.n_points == 0 and not cloud.loading:  # a file cut off before its first point: its error, not a server showing nothing
+            cloud.wait()
+    refused = refusal(cloud) if settings.hidden_classes else ""
+    if refused:  # (a progressive load, a cloud without classification): said once, not by every frame
+        with options_named():
+            raise SettingsError(refused)
+    return cloud
+
+
+def _points_said(cloud) -> str:
+    """The start-up line's count: while a progressive load goes on, the points loaded so far and
+    of how many (they were said as though the file's size: "250,000 points" of 3.3 M)."""
+    from ..lod.progressive import ProgressiveOctree
+
+    if not isinstance(cloud, ProgressiveOctree) or not cloud.loading:
+        return f"{cloud.n_points:,} points"
+    total = cloud.loader.total  # (the files' headers' or the demo's count; with a filter, of the points read)
+    of = "" if not total else f" of at most {total:,}" if cloud.loader.point_filter is not None else f" of {total:,}"
+    return f"{cloud.n_points:,}{of} points loaded so far (loading)"
+
+
 @app.command("view")
 def view(
     paths: list[Path] | None = typer.Argument(None, readable=False, help="Point cloud files or directories (several tiles make one scene). A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches."),
@@ -116,11 +162,7 @@ def view(
         view_live(str(replay) if replay is not None else live, replay=replay is not None, keep=keep, decay=decay, record=record,
                   overwrite=overwrite, host=host, port=port, browser=browser, open_browser=_open_browser)  # fmt: skip
         return
-    import gigapoint
-
-    from ..lod.progressive import ProgressiveOctree
-    from ..viewer.classes import refusal
-    from .live_cmd import serve_at
+    from .live_cmd import listen_at, serve_at
 
     if demo is not None and paths:
         raise GigapointError("view: give either PATH... or --demo N, not both")
@@ -134,45 +176,30 @@ def view(
         from ..viewer.window import check_display
 
         check_display()
-    budget = RenderSettings().point_budget
     if demo is not None:
         if not 1 <= demo <= 2_000_000_000:
             raise GigapointError(f"--demo: point count must be in 1..2e9, got {demo}")
         if options and progressive:
             raise GigapointError(f"{option_names(options)}: options of a point cloud held in memory, not of --progressive")
-        cloud = gigapoint.demo(demo, progressive=progressive if progressive is not None else demo > budget and not options, **options)
-    elif paths:
-        from ..lod import OctreeDir
-        from ..lod.preview import wait_for_preview
-
-        if len(paths) == 1 and OctreeDir(paths[0]).awaiting_preview:  # `convert` was started a moment ago
-            print(f"gigapoint viewer: waiting for the first preview of the conversion into {paths[0]} ...", file=sys.stderr)
-            wait_for_preview(paths[0])
-        cloud = open_files(subfolders_read(paths, recursive), budget, progressive, options, progress=False, point_filter=point_filter)  # big: shown while it loads
-    else:
+    elif not paths:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
-    if isinstance(cloud, ProgressiveOctree):  # a first slice of points, so that the first view frames them
-        if settings.hidden_classes:  # (and its attributes, none before its first points, say whether classes can hide)
-            cloud.wait_first_points()
-        deadline = time.monotonic() + 5.0
-        while cloud.n_points == 0 and cloud.loading and time.monotonic() < deadline:
-            time.sleep(0.02)
-        if cloud.n_points == 0 and not cloud.loading:  # a file cut off before its first point: its error, not a server showing nothing
-            cloud.wait()
-    refused = refusal(cloud) if settings.hidden_classes else ""
-    if refused:  # (a progressive load, a cloud without classification): said once, not by every frame
-        with options_named():
-            raise SettingsError(refused)
     if window:  # native window (rendercanvas + glfw), no server
         from ..viewer.window import open_window, run_loop
 
+        cloud = _open_cloud(paths, demo, options, progressive, recursive, point_filter, settings)
         open_window(cloud, settings=settings)  # first: a window that cannot open is said alone, not after the title line
-        print(f"gigapoint window: {cloud.name}, {cloud.n_points:,} points (drag: orbit, right drag: pan, wheel: zoom)", file=sys.stderr)
+        print(f"gigapoint window: {cloud.name}, {_points_said(cloud)} (drag: orbit, right drag: pan, wheel: zoom)", file=sys.stderr)
         _report_load(cloud)
         run_loop()
         return
-    server = serve_at(cloud, host, port, settings=settings)
-    print(f"gigapoint viewer: {cloud.name}, {cloud.n_points:,} points", file=sys.stderr)
+    sock = listen_at(host, port)  # before the points are read: a port in use was said after the whole file was
+    try:
+        cloud = _open_cloud(paths, demo, options, progressive, recursive, point_filter, settings)
+        server = serve_at(cloud, host, port, sock=sock, settings=settings)
+    except BaseException:
+        sock.close()
+        raise
+    print(f"gigapoint viewer: {cloud.name}, {_points_said(cloud)}", file=sys.stderr)
     _report_load(cloud)
     if not server.loopback:
         print(f"warning: listening on {host}, reachable from the network; the URL's token is the only key", file=sys.stderr)

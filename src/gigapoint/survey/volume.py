@@ -384,7 +384,10 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("volume: fill_nodata", fill_nodata)
     unnamed = f"volume: {UNNAMED_GEOMETRY}"  # (a bare dict's name in the messages starting with it, as its ring and hole errors name it)
-    label = unnamed if isinstance(clip_polygon, dict) else f"volume: clip_polygon={polygon_text(clip_polygon)}"
+    if isinstance(clip_polygon, dict):  # one naming its source as it is (the viewer's "the measured polygon"), not as GeoJSON given
+        label = f"volume: {clip_polygon['source']}" if isinstance(clip_polygon.get("source"), str) else unnamed
+    else:
+        label = f"volume: clip_polygon={polygon_text(clip_polygon)}"
     toe = clip_polygon_of(clip_polygon, label, unnamed)
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
     point_filter(classes, drop_classes, where="volume")  # bad classes told before an octree is opened

@@ -143,7 +143,7 @@ class Viewer:
     def __init__(self, cloud_or_path, width: int = 960, height: int = 600, host: str = "127.0.0.1", port: int = 0, settings=None, display: bool = True, url: str | None = None):
         from ..render.camera import MAX_IMAGE_SIDE
         from ..render.settings import RenderSettings
-        from .server import ViewerServer, _require_starlette, check_address
+        from .server import ViewerServer, _require_starlette, listening_socket
 
         for name, v in (("width", width), ("height", height)):  # the IFrame's: 0 showed nothing, without a word
             check_whole("Viewer", name, v, 1, MAX_IMAGE_SIDE, " pixels")
@@ -151,13 +151,17 @@ class Viewer:
         self._where_shown = _where_shown(url)
         # said before a path's points are read (a bad port or settings came after 15 s of a 5 M point file)
         _require_starlette()
-        check_address(host, port)
-        settings = RenderSettings.of(settings)  # (parsed once: the server takes the settings as they are)
-        self.cloud = _as_cloud(cloud_or_path)
-        self.name = self.cloud.name
-        self._opened_here = self.cloud is not cloud_or_path  # (from paths: none but this Viewer holds it)
-        token = None if self._where_shown is None else secrets.token_urlsafe(18)  # (its Host is the proxy's: no loopback check)
-        self.server = ViewerServer(self.cloud, host=host, port=port, token=token, settings=settings).start()
+        sock = listening_socket(host, port)  # (a port in use, too)
+        try:
+            settings = RenderSettings.of(settings)  # (parsed once: the server takes the settings as they are)
+            self.cloud = _as_cloud(cloud_or_path)
+            self.name = self.cloud.name
+            self._opened_here = self.cloud is not cloud_or_path  # (from paths: none but this Viewer holds it)
+            token = None if self._where_shown is None else secrets.token_urlsafe(18)  # (its Host is the proxy's: no loopback check)
+            self.server = ViewerServer(self.cloud, host=host, port=port, token=token, settings=settings, sock=sock).start()
+        except BaseException:
+            sock.close()
+            raise
         self.width, self.height = width, height
         _owned_by_cell(self)
         if display:

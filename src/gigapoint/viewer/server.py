@@ -439,10 +439,31 @@ def check_address(host, port) -> None:
         raise GigapointError(f"host must be an address or a host name (127.0.0.1: this machine only), got {host!r}")
 
 
-class ViewerServer:
-    """The viewer bound to a socket: run it in the foreground (CLI) or in a background thread (Jupyter)."""
+def listening_socket(host, port) -> socket.socket:
+    """The socket a ``ViewerServer`` on ``host``:``port`` serves, bound and listening: made before
+    the cloud is read, so that a port in use is said at once, not after the whole file was read."""
+    check_address(host, port)
+    sock = None
+    try:
+        family, kind, proto, _, addr = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+        sock = socket.socket(family, kind, proto)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(addr)
+    except OSError as exc:
+        if sock is not None:
+            sock.close()
+        raise GigapointError(f"host={host!r}, port={port!r}: cannot listen there ({exc.strerror or exc})") from None
+    sock.listen(128)  # (uvicorn listens again with its backlog)
+    sock.setblocking(False)
+    return sock
 
-    def __init__(self, cloud, host: str = "127.0.0.1", port: int = 0, token: str | None = None, settings=None, log_level: str = "warning"):
+
+class ViewerServer:
+    """The viewer bound to a socket: run it in the foreground (CLI) or in a background thread (Jupyter).
+    ``sock``: one ``listening_socket(host, port)`` made before the cloud was read (the server owns it then)."""
+
+    def __init__(self, cloud, host: str = "127.0.0.1", port: int = 0, token: str | None = None, settings=None, log_level: str = "warning",
+                 sock: socket.socket | None = None):
         _require_starlette()
         import uvicorn
 
@@ -454,15 +475,7 @@ class ViewerServer:
         # the address bound is allowed too: --host 127.0.0.2 answered its own URL with 403
         allowed = LOOPBACK_HOSTS | {host.strip("[]").lower()} if self.loopback and self.token is None else None
         self.app = create_app(self.core, self.token, allowed)
-        try:
-            family, kind, proto, _, addr = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
-            self.sock = socket.socket(family, kind, proto)
-            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            self.sock.bind(addr)
-        except OSError as exc:
-            raise GigapointError(f"host={host!r}, port={port!r}: cannot listen there ({exc.strerror or exc})") from None
-        self.sock.listen(128)  # (uvicorn listens again with its backlog)
-        self.sock.setblocking(False)
+        self.sock = sock if sock is not None else listening_socket(host, port)
         self.port = self.sock.getsockname()[1]
         config = uvicorn.Config(
             self.app,
