@@ -33,10 +33,10 @@ def _pyproj_moved(path, to_crs, from_crs=None):
     return move.transform(np.asarray(las.x), np.asarray(las.y), np.asarray(las.z))
 
 
-def _plain_tile(path, xyz, scale=0.01):
+def _plain_tile(path, xyz, scale=0.01, offsets=(0.0, 0.0, 0.0)):
     """A LAS 1.2 file of ``xyz`` naming no CRS."""
     header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales, header.offsets = [scale] * 3, [0.0] * 3
+    header.scales, header.offsets = [scale] * 3, list(offsets)
     las = laspy.LasData(header)
     las.x, las.y, las.z = np.asarray(xyz, np.float64).T
     las.write(str(path))
@@ -566,3 +566,15 @@ def test_an_octree_conversion_resumes_only_under_the_same_proj(autzen_path, tmp_
     monkeypatch.setattr(pyproj, "proj_version_str", "0.0.1")  # PROJ upgraded in between
     upgraded = gp.convert(autzen_path, tmp_path / "upgraded", to_crs=UTM, chunk_size=20_000)
     assert (upgraded.resumed, upgraded.points) == (False, 110_000)
+
+
+def test_a_millimetre_grid_moved_into_its_own_crs_keeps_its_millimetre(tmp_path):
+    """One step of 0.001 measured near y = 4.9e6 is 0.00099999998929: its power of ten below was
+    1e-4, a grid ten times finer than the points' own."""
+    from gigapoint.io.las_fields import power_of_ten_below
+
+    assert power_of_ten_below((494_295.3 + 0.001) - 494_295.3) == 0.001
+    assert power_of_ten_below(0.00099) == 0.0001 and power_of_ten_below(0.01) == 0.01
+    plain = _plain_tile(tmp_path / "utm.las", [[494_295.3, 4_877_123.4, 120.0], [494_395.3, 4_877_223.4, 130.0]], 0.001, (494_000.0, 4_877_000.0, 0.0))
+    gp.convert(plain, tmp_path / "same.las", to_crs=UTM, from_crs=UTM)
+    assert list(laspy.read(str(tmp_path / "same.las")).header.scales) == [0.001, 0.001, 0.001]

@@ -150,7 +150,9 @@ _INT32 = (-(2**31), 2**31 - 1)
 
 def power_of_ten_below(value: float) -> float:
     """The power of ten at or below ``value`` (0.003048 -> 0.001; 0.01 -> 0.01)."""
-    exponent = math.floor(math.log10(value) + 1e-9)  # (log10(0.001) is -2.9999999999999996)
+    # (log10(0.001) is -2.9999999999999996; a step measured as a difference of coordinates near 5e6 is
+    # 0.00099999998929: within float rounding of a power of ten, it is that power)
+    exponent = math.floor(math.log10(value) + 1e-6)
     return 10.0**exponent if exponent >= 0 else 1 / 10.0**-exponent
 
 
