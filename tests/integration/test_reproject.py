@@ -578,3 +578,17 @@ def test_a_millimetre_grid_moved_into_its_own_crs_keeps_its_millimetre(tmp_path)
     plain = _plain_tile(tmp_path / "utm.las", [[494_295.3, 4_877_123.4, 120.0], [494_395.3, 4_877_223.4, 130.0]], 0.001, (494_000.0, 4_877_000.0, 0.0))
     gp.convert(plain, tmp_path / "same.las", to_crs=UTM, from_crs=UTM)
     assert list(laspy.read(str(tmp_path / "same.las")).header.scales) == [0.001, 0.001, 0.001]
+
+
+def test_a_vertical_only_target_is_refused_before_a_point_is_read(cli, autzen_path, tmp_path, monkeypatch):
+    """EPSG:5703 was taken: x, y came out in degrees labelled NAVD88 height."""
+
+    def no_read(*args):
+        raise AssertionError("read")
+
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.to_file"), "read_chunks", no_read)
+    rc, _, err = cli("convert", autzen_path, "-o", tmp_path / "out.laz", "--to-crs", "EPSG:5703", "-q")
+    assert (rc, err) == (1, "error: convert: --to-crs EPSG:5703: NAVD88 height is a vertical CRS only: give a horizontal or compound CRS (e.g. EPSG:32610+5703)\n")
+    with pytest.raises(InputError, match=r"^tile: to_crs='EPSG:5703': NAVD88 height is a vertical CRS only: "):
+        gp.tile(autzen_path, tmp_path / "tiles", 100, to_crs="EPSG:5703")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

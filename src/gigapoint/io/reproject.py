@@ -81,6 +81,15 @@ def parse_crs(value, option: str):
         raise InputError(f"{option}: not a CRS PROJ knows ({first_line(exc)})") from None
 
 
+def parse_output_crs(value, option: str):
+    """``parse_crs`` of a target CRS, refusing one that cannot place points: a vertical CRS alone
+    (x, y came out in degrees labelled heights)."""
+    crs = parse_crs(value, option)
+    if crs.is_vertical and not crs.sub_crs_list:
+        raise InputError(f"{option}: {crs.name} is a vertical CRS only: give a horizontal or compound CRS (e.g. EPSG:32610+5703)")
+    return crs
+
+
 def round_offset(lo: np.ndarray, step: np.ndarray) -> np.ndarray:
     """A round offset at or below ``lo`` for a grid of ``step``: a multiple of step x 10^6, a power
     of ten (1000 m for a millimetre grid), rounded to the step's decimals (no 0.30000000000000004)."""
@@ -129,7 +138,7 @@ class Reprojection:
         self.tolerance = None  # (xy, z) of the fast path's bound (``output_grid``); None: exact
         self.interpolated_points = self.exact_points = 0  # (how each point was moved)
         self._areas: dict[int, list | None] = {}  # per transformer (by id): its ``_operation_areas``
-        self.target = parse_crs(to_crs, f"{where}: to_crs={to_crs!r}")
+        self.target = parse_output_crs(to_crs, f"{where}: to_crs={to_crs!r}")
         self.given_source = None if from_crs is None else parse_crs(from_crs, f"{where}: from_crs={from_crs!r}")
         self._by_crs: dict[str, object] = {}  # transformers, by their source CRS's text
         self._by_file: dict[str, object] = {}
