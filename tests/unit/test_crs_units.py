@@ -303,6 +303,33 @@ def test_geokeys_name_a_compound_crs_where_a_vertical_code_is_given(tmp_path):
     assert crs_units(None, {1024: 1, 3072: 26910, 4096: 32767, 4099: 9003})["vertical"] == US_FOOT_UNIT
 
 
+def test_a_vertical_code_in_another_unit_by_its_unit_key_is_read_in_that_unit(tmp_path):
+    """VerticalUnitsGeoKey 9003 over NAVD88 height (5703, metres) was read 'EPSG:2994+5703': heights
+    in US feet taken as metres (--to-crs left them unconverted). EPSG's NAVD88 in that unit is
+    taken; where EPSG has none, the vertical CRS's axis is in the key's unit."""
+    pyproj = pytest.importorskip("pyproj")
+    laspy = pytest.importorskip("laspy")
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.offsets, header.scales = [636_000.0, 849_000.0, 0.0], [0.01] * 3
+    header.vlrs.append(geokeys_vlr({1024: 1, 3072: 2994, 4096: 5703, 4099: 9003}))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = np.array([636_000.0, 637_000.0]), np.array([849_000.0, 850_000.0]), np.array([406.26, 520.51])
+    las.write(str(tmp_path / "ftus.las"))
+    assert read_las_header(tmp_path / "ftus.las").crs() == "EPSG:2994+6360"
+    assert crs_units(read_las_header(tmp_path / "ftus.las").crs())["vertical"] == US_FOOT_UNIT
+    target = "EPSG:32610+5703"
+    gp.convert(tmp_path / "ftus.las", tmp_path / "utm.las", to_crs=target)
+    _, _, z = pyproj.Transformer.from_crs("EPSG:2994+6360", target, always_xy=True).transform(np.asarray(las.x), np.asarray(las.y), np.asarray(las.z))
+    assert np.abs(np.asarray(laspy.read(str(tmp_path / "utm.las")).z) - z).max() <= 0.001
+    assert np.allclose(z, [123.828, 158.652], atol=0.001)
+    feet = write_geokeys_only(tmp_path / "egm.las", 32610, {4096: 3855, 4099: 9002})  # EGM2008 height: EPSG has it in metres alone
+    read = pyproj.CRS.from_user_input(read_las_header(feet).crs())
+    assert read.sub_crs_list[0] == pyproj.CRS.from_epsg(32610) and read.sub_crs_list[1].name == "EGM2008 height (foot)"
+    assert crs_units(read_las_header(feet).crs()) == {"horizontal": METRE, "vertical": FOOT, "vertical_assumed": False}
+    _, _, z = pyproj.Transformer.from_crs(read, "EPSG:32610+3855", always_xy=True).transform(500_000.0, 4_877_000.0, 100.0)
+    assert math.isclose(z, 30.48, rel_tol=1e-9)
+
+
 @pytest.mark.parametrize("pyproj_installed", [True, False])
 def test_crs_identity_of_one_crs_written_several_ways(pyproj_installed, monkeypatch):
     """One CRS as 'EPSG:h+v', as GDAL's COMPD_CS (its text ends ']]]': no code of its own) and as

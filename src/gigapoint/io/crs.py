@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..errors import GigapointError, GigapointWarning, InputError, warn
 from ._base import read_once
-from .las import LasHeader, LasReader, geokeys, read_las_header, wkt_of
+from .las import EPSG_LENGTH_UNITS, LasHeader, LasReader, geokeys, read_las_header, wkt_of
 from .paths import file_names
 from .ply import PlyReader
 from .registry import file_header, reader_for
@@ -112,7 +112,6 @@ def own_epsg(crs: str) -> str | None:
 #: many ways: "US survey foot", "Foot_US"); another unit is shown by its name
 LENGTH_SYMBOLS = ((1.0, "m"), (0.3048, "ft"), (1200 / 3937, "US ft"))
 #: The length units of GeoTIFF keys (ProjLinearUnitsGeoKey, VerticalUnitsGeoKey) by EPSG code
-EPSG_LENGTH_UNITS = {9001: ("metre", 1.0), 9002: ("foot", 0.3048), 9003: ("US survey foot", 1200 / 3937)}
 _WKT_TOKEN = re.compile(r'\s*(?:"((?:[^"]|"")*)"|([\[\](),])|([^\[\](),"\s]+))')
 _WKT_KINDS = {  # the CRS keywords of WKT1 and WKT2 whose axes' units are read
     "PROJCS": "projected", "PROJCRS": "projected", "PROJECTEDCRS": "projected",

@@ -655,11 +655,15 @@ def wkt_of(vlrs) -> str | None:
 GEOTIFF10_VERTICAL_CODES = (range(5001, 5034), range(5101, 5107))
 
 
+EPSG_LENGTH_UNITS = {9001: ("metre", 1.0), 9002: ("foot", 0.3048), 9003: ("US survey foot", 1200 / 3937)}
+
+
 def vlrs_crs(vlrs) -> str | None:
     """The CRS VLRs name (as wkt_of's): their WKT, else 'EPSG:n' of their GeoTIFF keys' projected
     or geographic CRS code, 'EPSG:n+v' where VerticalCSTypeGeoKey names the heights' vertical
     CRS v as well (pyproj reads that compound CRS; a user-defined one leaves its unit to
-    VerticalUnitsGeoKey: io.crs_units); None without either."""
+    VerticalUnitsGeoKey: io.crs_units), v in VerticalUnitsGeoKey's unit where that is another
+    (``vertical_in_unit``); None without either."""
     wkt = wkt_of(vlrs)
     if wkt:
         return wkt
@@ -669,8 +673,57 @@ def vlrs_crs(vlrs) -> str | None:
         return None
     vertical = keys.get(4096, 0)
     if 0 < vertical < 32767 and not any(vertical in codes for codes in GEOTIFF10_VERTICAL_CODES):
-        return f"EPSG:{horizontal}+{vertical}"
+        return vertical_in_unit(horizontal, vertical, keys.get(4099))
     return f"EPSG:{horizontal}"
+
+
+def vertical_in_unit(horizontal: int, vertical: int, unit: int | None) -> str:
+    """'EPSG:h+v', where the EPSG length ``unit`` (VerticalUnitsGeoKey) is not v's own: 'EPSG:h+w' of
+    the EPSG vertical CRS w of v's datum and axis in that unit (NAVD88 height in US feet: 6360),
+    else the compound's WKT with v's axis in that unit (heights in feet read as metres were
+    converted as metres). Without pyproj, 'EPSG:h+v' (nothing converts heights then)."""
+    text = f"EPSG:{horizontal}+{vertical}"
+    if unit not in EPSG_LENGTH_UNITS:
+        return text
+    try:
+        import pyproj
+
+        own = pyproj.CRS.from_epsg(vertical)
+    except (ImportError, pyproj.exceptions.CRSError):
+        return text
+    if not own.is_vertical or own.axis_info[0].unit_code == str(unit):
+        return text
+    other = _epsg_vertical_in_unit(pyproj, vertical, unit)
+    if other is not None:
+        return f"EPSG:{horizontal}+{other}"
+    moved = own.to_json_dict()
+    name, metres = EPSG_LENGTH_UNITS[unit]
+    moved["coordinate_system"]["axis"][0]["unit"] = {"type": "LinearUnit", "name": name, "conversion_factor": metres, "id": {"authority": "EPSG", "code": unit}}
+    moved["name"] = f"{own.name} ({name})"
+    moved.pop("id", None)  # (no longer EPSG's v)
+    flat = pyproj.CRS.from_epsg(horizontal)
+    compound = pyproj.CRS.from_json_dict({"type": "CompoundCRS", "name": f"{flat.name} + {moved['name']}", "components": [flat.to_json_dict(), moved]})
+    return compound.to_wkt()
+
+
+def _epsg_vertical_in_unit(pyproj, vertical: int, unit: int) -> int | None:
+    """The EPSG vertical CRS of EPSG ``vertical``'s datum and axis direction in EPSG length ``unit``
+    (PROJ's database), None where EPSG has none."""
+    import sqlite3
+
+    database = os.path.join(pyproj.datadir.get_data_dir(), "proj.db")
+    query = """SELECT v.code FROM vertical_crs v, axis a, vertical_crs s, axis sa
+        WHERE s.auth_name = 'EPSG' AND s.code = ? AND sa.coordinate_system_auth_name = s.coordinate_system_auth_name
+        AND sa.coordinate_system_code = s.coordinate_system_code AND v.auth_name = 'EPSG' AND v.deprecated = 0
+        AND v.datum_auth_name = s.datum_auth_name AND v.datum_code = s.datum_code
+        AND a.coordinate_system_auth_name = v.coordinate_system_auth_name AND a.coordinate_system_code = v.coordinate_system_code
+        AND a.orientation = sa.orientation AND a.uom_auth_name = 'EPSG' AND a.uom_code = ? ORDER BY v.code"""
+    try:
+        with contextlib.closing(sqlite3.connect(f"file:{database}?mode=ro", uri=True)) as db:
+            row = db.execute(query, (str(vertical), str(unit))).fetchone()
+    except sqlite3.Error:
+        return None
+    return int(row[0]) if row else None
 
 
 def geokeys(vlrs) -> dict[int, int]:
