@@ -592,3 +592,22 @@ def test_a_vertical_only_target_is_refused_before_a_point_is_read(cli, autzen_pa
     with pytest.raises(InputError, match=r"^tile: to_crs='EPSG:5703': NAVD88 height is a vertical CRS only: "):
         gp.tile(autzen_path, tmp_path / "tiles", 100, to_crs="EPSG:5703")
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("source", "target", "which"),
+    [("EPSG:2994", UTM, "neither CRS has a vertical part"), ("EPSG:2994+6360", UTM, "the target CRS has no vertical part"), ("EPSG:2994", "EPSG:4979", "the source CRS has no vertical part")],
+)
+def test_the_z_kept_warning_names_the_crs_lacking_a_vertical_part(tmp_path, recwarn, source, target, which):
+    """It said 'neither CRS has a vertical part' where one had one."""
+    plain = _plain_tile(tmp_path / "plain.las", [[636_000.0, 849_000.0, 400.0], [636_010.0, 849_010.0, 410.0]])
+    gp.convert(plain, tmp_path / "out.laz", to_crs=target, from_crs=source)
+    said = [str(w.message) for w in recwarn if issubclass(w.category, GigapointWarning)]
+    assert said == [f"{plain}: z is kept as it is, in its own unit, while x and y change unit: {which}, and PROJ transforms heights only between vertical CRSs; give compound CRSs (e.g. from 'EPSG:2994+6360' to 'EPSG:32610+5703') to convert z"]
+
+
+def test_a_geocentric_target_is_refused_before_a_point_is_read(cli, autzen_path, tmp_path):
+    """EPSG:4978 took autzen's z in feet as metres without a word."""
+    rc, _, err = cli("convert", autzen_path, "-o", tmp_path / "out.laz", "--to-crs", "EPSG:4978", "-q")
+    assert (rc, err) == (1, "error: convert: --to-crs EPSG:4978: WGS 84 is a geocentric CRS (x, y, z from the earth's centre), not a point cloud's output CRS: give a projected, geographic or compound CRS (e.g. EPSG:32610+5703)\n")
+    assert not (tmp_path / "out.laz").exists()

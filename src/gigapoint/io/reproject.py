@@ -83,10 +83,15 @@ def parse_crs(value, option: str):
 
 def parse_output_crs(value, option: str):
     """``parse_crs`` of a target CRS, refusing one that cannot place points: a vertical CRS alone
-    (x, y came out in degrees labelled heights)."""
+    (x, y came out in degrees labelled heights), a geocentric one (z in feet was taken as metres)."""
     crs = parse_crs(value, option)
     if crs.is_vertical and not crs.sub_crs_list:
         raise InputError(f"{option}: {crs.name} is a vertical CRS only: give a horizontal or compound CRS (e.g. EPSG:32610+5703)")
+    if crs.is_geocentric:
+        raise InputError(
+            f"{option}: {crs.name} is a geocentric CRS (x, y, z from the earth's centre), not a point cloud's output CRS: "
+            "give a projected, geographic or compound CRS (e.g. EPSG:32610+5703)"
+        )
     return crs
 
 
@@ -315,15 +320,18 @@ class Reprojection:
         up = abs(moved[3, 2] - moved[0, 2])
         units = [_z_metres(c) for c in (self.transformer(path).source_crs, self.target)]
         if math.isclose(up, scale[2], rel_tol=1e-9) and None not in units and not math.isclose(*units, rel_tol=1e-9):
-            self._warn_z_kept(path)
+            self._warn_z_kept(path, self.transformer(path).source_crs)
         return np.array([power_of_ten_below(across)] * 2 + [power_of_ten_below(up)])
 
-    def _warn_z_kept(self, path) -> None:
+    def _warn_z_kept(self, path, source) -> None:
+        """Says which CRS lacks a vertical part (a 3D geographic CRS's ellipsoidal heights count as one)."""
         if self._z_warned:
             return
         self._z_warned = True
+        lacking = [side for side, crs in (("the source CRS", source), ("the target CRS", self.target)) if len(crs.axis_info) < 3]
+        which = "neither CRS has a vertical part" if len(lacking) == 2 else f"{lacking[0]} has no vertical part" if lacking else "PROJ found no height transform"
         warn(
-            f"{path}: z is kept as it is, in its own unit, while x and y change unit: neither CRS has a vertical part, and PROJ "
+            f"{path}: z is kept as it is, in its own unit, while x and y change unit: {which}, and PROJ "
             f"transforms heights only between vertical CRSs; give compound CRSs (e.g. from 'EPSG:2994+6360' to 'EPSG:32610+5703') to convert z",
             GigapointWarning,
         )
