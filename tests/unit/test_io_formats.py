@@ -656,3 +656,30 @@ def test_an_ascii_ply_s_lists_are_left_out_of_its_lines_and_a_line_they_do_not_f
     with pytest.raises(InputError) as e:
         open_cloud(p)
     assert str(e.value) == f"{p}: line 15 has 6 values, the vertex element declares 4 besides its list feat (a length, then that many values)"
+
+
+def test_float_colours_of_0_255_whose_first_chunks_are_all_0_or_1_are_not_white(tmp_path, monkeypatch):
+    """A float 0..255 colour column whose first coloured chunk held only 0 and 1 was taken as 0..1
+    and never revised: every later colour x 255, clipped, white. A later chunk above 1.5 now
+    decides it again (as 8-bit colours are revised to 16-bit); chunks converted keep theirs."""
+    import gigapoint
+    from gigapoint.lod.progressive import loader
+
+    n = 6000
+    rng = np.random.default_rng(0)
+    a = np.zeros((n, 6), np.float32)
+    a[:, :3] = rng.random((n, 3)) * 10
+    a[: n // 2, 3:] = rng.integers(0, 2, (n // 2, 3))
+    a[n // 2 :, 3:] = rng.integers(2, 256, (n - n // 2, 3))
+    np.save(tmp_path / "a.npy", a)
+    np.savetxt(tmp_path / "a.txt", a, fmt="%.3f")
+    for name in ("a.npy", "a.txt"):
+        rgba = np.concatenate([c.rgba for c in read_chunks(tmp_path / name, chunk_size=1000)])
+        assert (rgba[: n // 2, :3] == a[: n // 2, 3:] * 255).all()  # the 0..1 chunks as read before
+        assert (rgba[n // 2 :, :3] == a[n // 2 :, 3:]).all()
+    monkeypatch.setattr(loader, "DECODE_CHUNK", 1000)
+    cloud = gigapoint.open(tmp_path / "a.npy", progressive=True)
+    cloud.wait()
+    got = np.concatenate([c.rgba for c in cloud.chunks()])
+    assert len(got) == n and (got[:, :3] == 255).all(1).sum() == (a[:, 3:] == 1).all(1).sum()
+    cloud.close()

@@ -149,9 +149,13 @@ class ColorScaler:
     uint8 colors pass through. Other colors are judged on the first chunk that holds a
     non-zero color: floats all within 0..1 are unit colors (x 255); integer-valued colors
     above 255 are 16-bit (>> 8); otherwise 8-bit. An 8-bit decision is revised to 16-bit
-    when a later chunk holds values above 255 (never back), so a dark first chunk of a
-    16-bit LAS file does not make the rest of it white.
+    when a later chunk holds values above 255, and a 0..1 one to 8- or 16-bit when a later
+    chunk holds values above ``UNIT_OVERSHOOT`` (never back), so a dark first chunk of a
+    16-bit LAS file or of a 0..255 float file does not make the rest of it white. Chunks
+    already converted keep their colours.
     """
+
+    UNIT_OVERSHOOT = 1.5  # 0..1 colours that stray a little above 1 (1.025) stay 0..1, clipped
 
     def __init__(self) -> None:
         self.mode: str | None = None  # "unit", "8", "16"
@@ -174,6 +178,8 @@ class ColorScaler:
             return to_rgba8(c)
         if c.dtype.kind == "f":
             c = np.nan_to_num(c, nan=0.0, posinf=0.0, neginf=0.0)
+        if self.mode == "unit" and c.size and c.max() > self.UNIT_OVERSHOOT:
+            self.mode = None  # decided again on this chunk: 0..255 or 16-bit colours whose first were all <= 1
         if self.mode is None and c.size and np.any(c):
             hi = float(c.max())
             if c.dtype.kind == "f" and hi <= 1.0:
