@@ -421,3 +421,17 @@ def test_a_laz_whose_chunk_table_offset_is_damaged_loads_whole_progressively(tmp
     got = np.concatenate([c.xyz for c in LasReader().read_salvaged(bad, 50_000)])
     las = laspy.read(full)
     np.testing.assert_array_equal(got, np.c_[las.x, las.y, las.z])
+
+
+def test_a_laz_claiming_more_points_than_it_holds_does_not_say_it_failed_after_0(tmp_path):
+    """A small LAZ is decoded whole by a child, which fails on the points its header claims
+    beyond those it holds: nothing was given, and the error said "reading failed after 0 of the
+    6,000 points", as if its first point were bad. Where the decoder got to is not known."""
+    path = _write_laz(tmp_path / "a.laz", 5_000)
+    data = bytearray(path.read_bytes())
+    data[107:111] = (6_000).to_bytes(4, "little")  # LAS 1.2's point count
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError) as err:
+        gp.open(path)
+    assert str(err.value).startswith(f"{path}: truncated or corrupt LAZ point data: reading failed; the header claims 6,000 points (")
+    assert "after" not in str(err.value)

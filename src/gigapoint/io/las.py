@@ -878,11 +878,10 @@ class LasReader(Reader):
         done = start
 
         def corrupt(exc: Exception) -> InputError:
-            return fail(
-                path,
-                f"truncated or corrupt {kind} point data: reading failed after {done:,} of the {hdr.point_count:,} points "
-                f"the header claims ({one_line(exc) or type(exc).__name__})",
-            )
+            # nothing given yet: where the decoder failed is not known (a small LAZ is decoded whole
+            # by a child), and "after 0" read as if the first point were bad
+            where = f" after {done:,} of the {hdr.point_count:,} points the header claims" if done > start else f"; the header claims {hdr.point_count:,} points"
+            return fail(path, f"truncated or corrupt {kind} point data: reading failed{where} ({one_line(exc) or type(exc).__name__})")
 
         # only laspy's and lazrs's work is in the try blocks: an error of the decoding below
         # (a kernel that fails to compile, say) is not the file's and keeps its own message
