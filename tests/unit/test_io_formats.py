@@ -683,3 +683,49 @@ def test_float_colours_of_0_255_whose_first_chunks_are_all_0_or_1_are_not_white(
     got = np.concatenate([c.rgba for c in cloud.chunks()])
     assert len(got) == n and (got[:, :3] == 255).all(1).sum() == (a[:, 3:] == 1).all(1).sum()
     cloud.close()
+
+
+def _pts_lines(n: int, seed: int) -> str:
+    xyz, rgb = ref_points(n, seed)
+    return "".join(f"{x:.3f} {y:.3f} {z:.3f} 7 {r} {g} {b}\n" for (x, y, z), (r, g, b) in zip(xyz, rgb))
+
+
+def test_a_pts_file_holding_fewer_points_than_its_count_says_so_once(tmp_path):
+    """A PTS file's first-line count was read and thrown away: one cut at a line's end (5 000
+    declared, 4 000 there) loaded its 4 000 points without a word."""
+    import gigapoint
+    from gigapoint.errors import GigapointWarning
+
+    p = tmp_path / "cut.pts"
+    p.write_text("5000\n" + _pts_lines(4000, 0))
+    message = f"{p}: PTS file declares 5,000 points, holds 4,000: those read"
+    for read in (gigapoint.open, file_info):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            got = read(p)
+        assert [str(w.message) for w in caught if issubclass(w.category, GigapointWarning)] == [message]
+    assert got["point_count"] == 4000
+    p.write_text("4000\n" + _pts_lines(4000, 0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert gigapoint.open(p).n_points == 4000
+
+
+def test_a_multi_scan_pts_file_reads_every_scan(tmp_path):
+    """A count line between two scans was "line 2002 has 1 columns, expected 7": it is the next
+    scan's count, and the counts are summed."""
+    import gigapoint
+    from gigapoint.errors import GigapointWarning
+
+    p = tmp_path / "scans.pts"
+    p.write_text("2000\n" + _pts_lines(2000, 0) + "3000\n" + _pts_lines(3000, 1))
+    want = np.concatenate([ref_points(2000, 0)[0], ref_points(3000, 1)[0]])
+    for chunk_size in (700, 2000, 10_000):  # the count line within a chunk, first in one, ...
+        got = np.concatenate([c.xyz for c in read_chunks(p, chunk_size=chunk_size)])
+        np.testing.assert_allclose(got, want, atol=1e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert gigapoint.open(p).n_points == 5000
+    p.write_text("2000\n" + _pts_lines(2000, 0) + "3000\n" + _pts_lines(2500, 1))
+    with pytest.warns(GigapointWarning, match=r"scans\.pts: PTS file declares 5,000 points \(2 scans\), holds 4,500: those read"):
+        assert gigapoint.open(p).n_points == 4500

@@ -16,7 +16,8 @@ works too. Without a header, columns are read by count:
  k    x y z, then attributes column_3 ... column_{k-1}
 ====  ==============================================
 
-A PTS file's first line (the point count alone) is skipped. Lines starting with ``#`` or
+A PTS file's first line (the point count alone) is skipped, and so is a count line between two
+scans (a multi-scan PTS); a file holding more or fewer points than they sum to is said. Lines starting with ``#`` or
 ``//`` are comments, and so is what follows either on a line of points ("1 2 3 # note") or on
 the header line ("x y z intensity # note"); blank lines are skipped.
 """
@@ -111,8 +112,10 @@ class _Layout:
     """What the first lines of a text file say: lines to skip, delimiter, column names."""
 
     def __init__(self, path: Path, skip: int, delimiter: str | None, names: list[str], header: bool, quoted: bool,
-                 columns: list[int] | None = None, n_columns: int | None = None, comments_end_lines: bool = True):  # fmt: skip
+                 columns: list[int] | None = None, n_columns: int | None = None, comments_end_lines: bool = True,
+                 declared: int | None = None):  # fmt: skip
         self.path, self.skip, self.delimiter, self.names, self.header = path, skip, delimiter, names, header
+        self.declared = declared  # a PTS file's point count (its first line); None: not a PTS file
         # a '#' or '//' ends a line of points ("1 2 3 # note"), unless a named column's text starts
         # with one ("#ff0000" under "x y z color": its lines count that column)
         self.comments_end_lines = comments_end_lines
@@ -165,11 +168,10 @@ def _read_layout(path: Path) -> _Layout:
         if not _is_comment(line):
             break
     # PTS: a point count alone on the first line
-    if header_names is None and len(candidates) >= 2:
-        tokens = candidates[0][1].split()
-        if len(tokens) == 1 and tokens[0].isdigit() and len(candidates[1][1].split()) >= 3:
-            skip = candidates[0][0]
-            candidates = candidates[1:]
+    declared = None
+    if header_names is None and len(candidates) >= 2 and _pts_count(candidates[0][1]) is not None and len(candidates[1][1].split()) >= 3:
+        skip, declared = candidates[0][0], _pts_count(candidates[0][1])
+        candidates = candidates[1:]
     data = [c for c in candidates if not _is_comment(c[1])]
     if not data and first and first[-1][0] > _MAX_HEADER_LINES:
         raise fail(path, f"no point data in the first {_MAX_HEADER_LINES} lines (only comments)")
@@ -207,7 +209,13 @@ def _read_layout(path: Path) -> _Layout:
         if len(tokens) < 3:
             raise fail(path, f"line {lineno} has {len(tokens)} columns, expected at least 3 (x y z)")
         names = _names_by_count(len(tokens))
-    return _Layout(path, skip, delimiter, names, header_names is not None, quoted, columns, n_columns)
+    return _Layout(path, skip, delimiter, names, header_names is not None, quoted, columns, n_columns, declared=declared)
+
+
+def _pts_count(line: str) -> int | None:
+    """The point count of a PTS count line (one integer alone), else None."""
+    tokens = line.split()
+    return int(tokens[0]) if len(tokens) == 1 and tokens[0].isdigit() else None
 
 
 def _line_columns(line: str, layout: _Layout) -> list[str]:
@@ -242,7 +250,22 @@ def _parsed(lines: list[str], delimiter: str | None, columns: list[int] | None =
     return np.loadtxt(lines, delimiter=delimiter, comments=("#", "//"), ndmin=2, dtype=np.float64, usecols=columns)
 
 
-def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray]:
+def _parsed_lines(lines: list[str], layout: _Layout) -> np.ndarray | None:
+    """Lines of points as an array of the columns read; None where a line does not parse."""
+    try:
+        arr = _parsed(lines, layout.delimiter, layout.columns)
+    except ValueError:
+        return None
+    if arr.size and arr.shape[1] != len(layout.names):
+        return None
+    # usecols reads short lines as long as they reach the columns used
+    if layout.columns is not None and not all(len(_line_columns(ln, layout)) == layout.n_columns for ln in lines if ln.strip() and not _is_comment(ln)):
+        return None
+    return arr
+
+
+def _chunks(path: Path, chunk_size: int, layout: _Layout, counts: list[int]) -> Iterator[np.ndarray]:
+    """The file's points, ``chunk_size`` lines at a time; a PTS file's count lines are appended to ``counts``."""
     ncols, used, columns = layout.n_columns, len(layout.names), layout.columns
     try:
         with open(path, encoding="utf-8-sig") as f:
@@ -255,20 +278,19 @@ def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray
                     return
                 if layout.quoted:  # "1.5": a spreadsheet's quoted numbers (loadtxt's quotechar excludes two comment marks)
                     lines = [ln.replace('"', "") for ln in lines]
-                try:
-                    arr = _parsed(lines, layout.delimiter, columns)
-                    good = not arr.size or arr.shape[1] == used
-                    if good and columns is not None:  # usecols reads short lines as long as they reach the columns used
-                        good = all(len(_line_columns(ln, layout)) == ncols for ln in lines if ln.strip() and not _is_comment(ln))
-                except ValueError:
-                    good = False
-                if not good:  # the lines before the bad one first: a progressive load keeps them
+                arr = _parsed_lines(lines, layout)
+                while arr is None:
                     bad, problem = _first_bad_line(path, lines, lineno, layout, ncols, columns)
-                    with contextlib.suppress(ValueError):
-                        before = _parsed(lines[:bad], layout.delimiter, columns) if bad else np.empty((0, used))
-                        if before.size and before.shape[1] == used:
-                            yield before
-                    raise fail(path, problem)
+                    count = _pts_count(lines[bad]) if layout.declared is not None else None
+                    if count is None:  # the lines before the bad one first: a progressive load keeps them
+                        with contextlib.suppress(ValueError):
+                            before = _parsed(lines[:bad], layout.delimiter, columns) if bad else np.empty((0, used))
+                            if before.size and before.shape[1] == used:
+                                yield before
+                        raise fail(path, problem)
+                    counts.append(count)  # a multi-scan PTS: the next scan's count line, read as a blank one
+                    lines[bad] = "\n"
+                    arr = _parsed_lines(lines, layout)
                 lineno += len(lines)
                 if arr.size:
                     yield arr
@@ -301,12 +323,15 @@ class TextReader(Reader):
         path = check_file(path)
         layout = _layout(path)
         scaler = ColorScaler()  # colors arrive as floats: 0..1, 0..255 or 0..65535, decided once per file
-        total = 0
-        for arr in _chunks(path, chunk_size, layout):
+        total, counts = 0, [layout.declared]
+        for arr in _chunks(path, chunk_size, layout, counts):
             total += len(arr)
             yield rows_to_chunk(path, layout.names, [arr[:, i] for i in range(arr.shape[1])], scaler)
         if total == 0:
             raise fail(path, "holds no points", EmptyCloudError)
+        if layout.declared is not None and sum(counts) != total:  # (a PTS cut at a line's end was read without a word)
+            scans = f" ({len(counts)} scans)" if len(counts) > 1 else ""
+            warn(f"{path}: PTS file declares {sum(counts):,} points{scans}, holds {total:,}: those read", GigapointWarning)
 
     def header(self, path: Path, salvage: bool = False) -> dict:
         """Its columns from its first lines; the points are counted only when read."""
