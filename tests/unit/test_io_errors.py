@@ -814,3 +814,27 @@ def test_ply_ascii_integer_property_that_its_type_cannot_hold(tmp_path, value, s
     p.write_text(head + "0 0 0 1\n1.5 1 1 255\n2 2 2 0\n")
     cloud = open_cloud(p)
     assert sorted(cloud.attributes["intensity"].tolist()) == [0, 1, 255] and sorted(cloud.positions()[:, 0].round(6).tolist()) == [0, 1.5, 2]
+
+
+@pytest.mark.parametrize("way", ALL_WAYS)
+def test_bool_positions_in_npy_or_npz_are_refused_as_from_arrays_refuses_them(tmp_path, way):
+    """Bool arrays were read as positions of 0 and 1 ("biuf" took them); gp.from_arrays refuses
+    them ("xyz must hold numbers"), and so do the readers now."""
+    flags = np.random.default_rng(0).random((20, 3)) > 0.5
+    said = "xyz must hold numbers (integers or floats), got dtype bool"
+    p = tmp_path / "b.npy"
+    np.save(p, flags)
+    assert raises(InputError, p, way) == f"{p}: NPY array: {said}"
+    np.save(p, np.zeros((20, 6), bool))
+    raises(InputError, p, way, said)
+    table = np.zeros(20, [("x", "?"), ("y", "f4"), ("z", "f4")])
+    np.save(p, table)
+    raises(InputError, p, way, f"NPY array field 'x': {said}")
+    q = tmp_path / "b.npz"
+    np.savez(q, xyz=flags, rgb=np.zeros((20, 3), np.uint8))
+    raises(InputError, q, way, f"NPZ member 'xyz': {said}")
+    np.savez(q, x=flags[:, 0], y=np.zeros(20), z=np.zeros(20))
+    raises(InputError, q, way, f"NPZ member 'x': {said}")
+    with pytest.raises(InputError) as err:
+        gp.from_arrays(flags)
+    assert str(err.value) == f"arrays: {said}"

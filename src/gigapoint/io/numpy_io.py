@@ -58,6 +58,12 @@ def _read_npy_header(f) -> tuple[tuple, bool, np.dtype]:
         raise ValueError(f"its header is not an NPY header ({type(exc).__name__}: {exc})") from None
 
 
+def _check_positions(path: Path, what: str, dtype: np.dtype) -> None:
+    """Bool positions were read as 0 and 1; refused as gp.from_arrays refuses them (points_for)."""
+    if dtype.kind == "b":
+        raise fail(path, f"{what}: xyz must hold numbers (integers or floats), got dtype {dtype}")
+
+
 def _layout_names(path: Path, what: str, dtype: np.dtype, shape: tuple) -> list[str]:
     """Column names of an array used as a whole point table (raises on shapes that are not one)."""
     if dtype.names:
@@ -65,9 +71,13 @@ def _layout_names(path: Path, what: str, dtype: np.dtype, shape: tuple) -> list[
             raise fail(path, f"{what}: structured array without x, y, z fields (fields: {', '.join(dtype.names)})")
         if len(shape) != 1:
             raise fail(path, f"{what}: structured point array must be 1-D, got shape {shape}")
+        for name in dtype.names:
+            if name.lower() in ("x", "y", "z"):
+                _check_positions(path, f"{what} field {name!r}", dtype[name])
         return list(dtype.names)
     if dtype.kind not in "biuf":
         raise fail(path, f"{what}: expected a numeric array, got dtype {dtype}")
+    _check_positions(path, what, dtype)
     if len(shape) != 2 or shape[1] not in _COLUMNS:
         raise fail(path, f"{what}: expected an (N, 3), (N, 4), (N, 6) or (N, 7) array, got shape {shape}")
     return _COLUMNS[shape[1]]
@@ -243,6 +253,7 @@ def _npz_plan(path: Path, zf: zipfile.ZipFile) -> tuple[dict[str, _Member], list
             m = members[lower[a]]
             if len(m.shape) != 1 or m.dtype.kind not in "biuf":
                 raise fail(path, f"NPZ member {m.key!r} must be a numeric (N,) array, got shape {m.shape} dtype {m.dtype}")
+            _check_positions(path, f"NPZ member {m.key!r}", m.dtype)
             if m.rows != first.rows:
                 raise fail(path, f"NPZ member {m.key!r} has {m.rows:,} rows, {first.key!r} has {first.rows:,}")
         use = {k: m for k, m in members.items() if m.rows == first.rows and len(m.shape) in (1, 2)}
@@ -254,6 +265,7 @@ def _npz_plan(path: Path, zf: zipfile.ZipFile) -> tuple[dict[str, _Member], list
             return members, _layout_names(path, f"NPZ member {m.key!r}", m.dtype, m.shape), {m.key: m}
         raise fail(path, f"NPZ archive has no point positions: expected a key named one of {', '.join(XYZ_KEYS)} or x, y, z (keys: {', '.join(members)})")
     xm = members[xyz_key]
+    _check_positions(path, f"NPZ member {xm.key!r}", xm.dtype)
     if xm.dtype.names or len(xm.shape) != 2 or xm.shape[1] != 3 or xm.dtype.kind not in "biuf":
         if len(members) == 1 or xm.dtype.names:
             return members, _layout_names(path, f"NPZ member {xm.key!r}", xm.dtype, xm.shape), {xm.key: xm}
