@@ -16,7 +16,7 @@ from test_geo_coords import UTM10_NAVD88_WKT1, UTM10_NAVD88_WKT2, UTM11_NAVD88_W
 import gigapoint as gp
 from gigapoint.io import crs_units, files_units, horizontal_epsg, vertical_crs
 from gigapoint.io.crs import crs_identity
-from gigapoint.io.las import geokeys, read_las_header
+from gigapoint.io.las import geokeys, read_las_header, vertical_in_unit
 from gigapoint.viewer import measure as M
 
 DATA = Path(__file__).parent / "data" / "pdal_ept"
@@ -301,6 +301,20 @@ def test_geokeys_name_a_compound_crs_where_a_vertical_code_is_given(tmp_path):
         said[vertical] = read_las_header(path).crs()
     assert said == {5703: "EPSG:26910+5703", 6360: "EPSG:26910+6360", 32767: "EPSG:26910", 5030: "EPSG:26910", 5103: "EPSG:26910", 0: "EPSG:26910"}
     assert crs_units(None, {1024: 1, 3072: 26910, 4096: 32767, 4099: 9003})["vertical"] == US_FOOT_UNIT
+
+
+def test_a_vertical_code_with_a_unit_key_without_pyproj_names_the_compound_code(tmp_path, monkeypatch, request):
+    """Without pyproj, VerticalCSTypeGeoKey with VerticalUnitsGeoKey (metres or feet) read the
+    header's CRS by an UnboundLocalError (pyproj, never imported, named in the except clause);
+    'EPSG:h+v' is read (nothing converts heights then)."""
+    vertical_in_unit.cache_clear()  # (a result cached with pyproj would hide the run without it)
+    request.addfinalizer(vertical_in_unit.cache_clear)  # (nor may this run's results outlive it)
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (an import of it raises ImportError)
+    said = {}
+    for units in (9001, 9002, 9003):
+        path = write_geokeys_only(tmp_path / f"u{units}.las", 26910, {4096: 5703, 4099: units})
+        said[units] = read_las_header(path).crs()
+    assert said == {9001: "EPSG:26910+5703", 9002: "EPSG:26910+5703", 9003: "EPSG:26910+5703"}
 
 
 def test_a_vertical_code_in_another_unit_by_its_unit_key_is_read_in_that_unit(tmp_path):

@@ -8,6 +8,7 @@ allocate or loop on whatever a corrupt header claims.
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import logging
 import math
@@ -677,6 +678,7 @@ def vlrs_crs(vlrs) -> str | None:
     return f"EPSG:{horizontal}"
 
 
+@functools.lru_cache(maxsize=256)  # (pyproj's look-ups take ~18 ms; each header read asks again)
 def vertical_in_unit(horizontal: int, vertical: int, unit: int | None) -> str:
     """'EPSG:h+v', where the EPSG length ``unit`` (VerticalUnitsGeoKey) is not v's own: 'EPSG:h+w' of
     the EPSG vertical CRS w of v's datum and axis in that unit (NAVD88 height in US feet: 6360),
@@ -687,9 +689,11 @@ def vertical_in_unit(horizontal: int, vertical: int, unit: int | None) -> str:
         return text
     try:
         import pyproj
-
+    except ImportError:
+        return text
+    try:
         own = pyproj.CRS.from_epsg(vertical)
-    except (ImportError, pyproj.exceptions.CRSError):
+    except pyproj.exceptions.CRSError:
         return text
     if not own.is_vertical or own.axis_info[0].unit_code == str(unit):
         return text
