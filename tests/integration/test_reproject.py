@@ -611,3 +611,23 @@ def test_a_geocentric_target_is_refused_before_a_point_is_read(cli, autzen_path,
     rc, _, err = cli("convert", autzen_path, "-o", tmp_path / "out.laz", "--to-crs", "EPSG:4978", "-q")
     assert (rc, err) == (1, "error: convert: --to-crs EPSG:4978: WGS 84 is a geocentric CRS (x, y, z from the earth's centre), not a point cloud's output CRS: give a projected, geographic or compound CRS (e.g. EPSG:32610+5703)\n")
     assert not (tmp_path / "out.laz").exists()
+
+
+@pytest.mark.parametrize("target", ["EPSG:32610+5703", UTM])
+def test_z_in_metres_of_a_compound_source_in_feet_is_kept_without_a_warning(tmp_path, recwarn, target):
+    """EPSG:2994+5703 has x in feet, z in metres (NAVD88): z's unit was taken as x's, and z, kept in
+    metres as it should be, was warned of ('PROJ found no height transform')."""
+    plain = _plain_tile(tmp_path / "plain.las", [[636_000.0, 849_000.0, 400.0], [636_010.0, 849_010.0, 410.0]])
+    gp.convert(plain, tmp_path / "out.las", to_crs=target, from_crs="EPSG:2994+5703")
+    assert [str(w.message) for w in recwarn if issubclass(w.category, GigapointWarning)] == []
+    assert np.allclose(np.asarray(laspy.read(str(tmp_path / "out.las")).z), [400.0, 410.0], atol=0.0005)
+
+
+def test_z_kept_between_two_vertical_crss_proj_finds_no_transform_for_is_warned_of(tmp_path, recwarn):
+    """EGM2008 (m) to NAVD88 (US ft) needs a geoid grid: without one PROJ keeps z, in metres, read as feet."""
+    if pyproj.Transformer.from_crs("EPSG:32610+3855", "EPSG:2994+6360", always_xy=True).transform(494_000.0, 4_877_000.0, 100.0)[2] != 100.0:
+        pytest.skip("PROJ has the geoid grid here: it moves z")
+    plain = _plain_tile(tmp_path / "plain.las", [[494_000.0, 4_877_000.0, 100.0], [494_010.0, 4_877_010.0, 110.0]])
+    gp.convert(plain, tmp_path / "out.las", to_crs="EPSG:2994+6360", from_crs="EPSG:32610+3855")
+    said = [str(w.message) for w in recwarn if issubclass(w.category, GigapointWarning)]
+    assert said == [f"{plain}: z is kept as it is, in its own unit, while x and y change unit: PROJ found no height transform, and PROJ transforms heights only between vertical CRSs; give compound CRSs (e.g. from 'EPSG:2994+6360' to 'EPSG:32610+5703') to convert z"]

@@ -111,9 +111,12 @@ def _metres_across(crs) -> float | None:
 
 
 def _z_metres(crs) -> float | None:
-    """Metres in the unit z is in where ``crs`` has no vertical part: its x's (``_metres_across``),
-    metres for a geographic one (its heights are ellipsoidal, in metres: feet to degrees keeps z
-    in feet, which was said nothing of)."""
+    """Metres in the unit z is in: its vertical axis's (a compound CRS's is its last, as pyproj
+    lists them; a 3D geographic one's ellipsoidal heights); without one, its x's
+    (``_metres_across``), metres for a geographic one (its heights are ellipsoidal, in metres: feet
+    to degrees keeps z in feet, which was said nothing of)."""
+    if len(crs.axis_info) == 3:  # (EPSG:2994+5703 has x in feet, z in metres: x's unit warned of z kept in metres)
+        return crs.axis_info[2].unit_conversion_factor
     return 1.0 if crs.is_geographic else _metres_across(crs)
 
 
