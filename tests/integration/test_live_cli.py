@@ -126,6 +126,24 @@ def test_record_into_a_recording_asks_for_an_option_view_has_and_a_bad_port_reco
     assert lone.returncode == 1 and "--overwrite: replaces a recording in --record DIR" in lone.stderr, lone.stderr
 
 
+def test_a_port_in_use_records_nothing(tmp_path):
+    """`view --live S --record DIR --port TAKEN` found the port in use after the stream had
+    started recording into DIR: a recording left behind by a command that failed."""
+    import socket
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    np.save(frames / "0.npy", np.random.default_rng(0).uniform(0, 5, (300, 3)))
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "view", "--live", str(frames), "--record", str(tmp_path / "rec"),
+                              "--port", str(port), "--no-browser"], capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert (bad.returncode, bad.stderr) == (1, f"error: --host 127.0.0.1 --port {port}: cannot listen there (Address already in use)\n")
+    assert not (tmp_path / "rec").exists()
+
+
 def test_view_replay_refuses_to_record_over_the_recording_it_replays(tmp_path):
     """`view --replay DIR --record DIR --overwrite` deleted DIR's frames before they were read:
     it served an empty stream and said "recorded 0 frames", the recording lost."""

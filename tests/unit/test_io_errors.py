@@ -838,3 +838,19 @@ def test_bool_positions_in_npy_or_npz_are_refused_as_from_arrays_refuses_them(tm
     with pytest.raises(InputError) as err:
         gp.from_arrays(flags)
     assert str(err.value) == f"arrays: {said}"
+
+
+@pytest.mark.parametrize("way", ALL_WAYS)
+def test_text_positions_in_npy_or_npz_are_said_in_one_wording(tmp_path, way):
+    """Positions that are not numbers were said three ways ("expected a numeric array", "must be a
+    numeric (N, 3) array, got shape ... dtype"): now as gp.from_arrays says them."""
+    words = np.array([["1", "2", "3"]] * 20)
+    said = "xyz must hold numbers (integers or floats), got dtype <U1"
+    p = tmp_path / "w.npy"
+    np.save(p, words)
+    assert raises(InputError, p, way) == f"{p}: NPY array: {said}"
+    q = tmp_path / "w.npz"
+    np.savez(q, xyz=words, rgb=np.zeros((20, 3), np.uint8))
+    assert raises(InputError, q, way) == f"{q}: NPZ member 'xyz': {said}"
+    np.savez(q, x=words[:, 0], y=np.zeros(20), z=np.zeros(20))
+    assert raises(InputError, q, way) == f"{q}: NPZ member 'x': {said}"

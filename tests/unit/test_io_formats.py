@@ -729,3 +729,20 @@ def test_a_multi_scan_pts_file_reads_every_scan(tmp_path):
     p.write_text("2000\n" + _pts_lines(2000, 0) + "3000\n" + _pts_lines(2500, 1))
     with pytest.warns(GigapointWarning, match=r"scans\.pts: PTS file declares 5,000 points \(2 scans\), holds 4,500: those read"):
         assert gigapoint.open(p).n_points == 4500
+
+
+def test_a_pts_file_of_many_scans_is_parsed_once_per_chunk(tmp_path, monkeypatch):
+    """Each count line within a chunk cost a failed parse and a re-parse of the whole chunk:
+    400 scans of 50 points took 16.7 s. The count lines are now found first."""
+    from gigapoint.io import text
+
+    calls = []
+    parsed = text._parsed
+    monkeypatch.setattr(text, "_parsed", lambda lines, *a: calls.append(len(lines)) or parsed(lines, *a))
+    p = tmp_path / "many.pts"
+    p.write_text("".join("50\n" + _pts_lines(50, seed) for seed in range(400)))
+    got = np.concatenate([c.xyz for c in read_chunks(p)])
+    want = np.concatenate([ref_points(50, seed)[0] for seed in range(400)])
+    assert len(got) == 20_000
+    np.testing.assert_allclose(got, want, atol=1e-3)
+    assert len(calls) == 1

@@ -184,6 +184,29 @@ def test_heights_are_each_pixels_highest_point_whatever_the_images_point_size():
         assert drawn == np.isfinite(expected).sum() if settings.get("size_mode") == "fixed" else drawn > 2 * np.isfinite(expected).sum()
 
 
+def test_an_image_of_one_pixel_points_in_a_colour_of_its_own_is_its_surface_too(monkeypatch):
+    """Any setting apart from the surface's (an elevation colour mode, a background) drew the
+    cloud a second time for the heights: only those that move a point's pixel or depth do."""
+    from gigapoint.render import renderer, surface
+    from gigapoint.survey import orthophoto
+
+    drawn = []
+
+    def counted(*args, **kw):
+        drawn.append(1)
+        return renderer.render_frame(*args, **kw)
+
+    monkeypatch.setattr(orthophoto, "render_frame", counted)
+    monkeypatch.setattr(surface, "render_frame", counted)
+    xyz = sparse_cloud()
+    expected, _ = binned_max(gp.Camera.top_down((xyz.min(axis=0), xyz.max(axis=0)), 1.0), xyz)
+    for settings, draws in (({"color_mode": "elevation", "background": "white"}, 1), ({"point_size": 3}, 2), ({"hqs": True}, 2)):
+        drawn.clear()
+        result = gp.orthophoto(gp.from_arrays(xyz), 1.0, size_mode="fixed", **settings)
+        assert len(drawn) == draws, settings
+        np.testing.assert_allclose(result.heights, expected, rtol=0, atol=1e-4, err_msg=str(settings))
+
+
 def test_autzens_dsm_is_each_pixels_highest_point(autzen_path):
     import laspy
 

@@ -19,28 +19,30 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
     prefer_passive_wait()  # `gigapoint demo --live` comes here without `view`
     from ..live import LiveCloud
     from ..live.sources import Player, ReplaySource, SyntheticSensor, open_source
-    from ..viewer.server import check_address
 
-    check_address(host, port)  # before anything plays or records: a bad --port failed with a recording made
-    src = ReplaySource(source) if replay else open_source(source)
-    bounds = None
-    if isinstance(src, SyntheticSensor):
-        from ..io.demo import SCENE_SIZE
-
-        bounds = ((0.0, 0.0, -30.0), (SCENE_SIZE, SCENE_SIZE, 60.0))  # frame the town from the start
-    live = LiveCloud(keep=keep, decay=decay, name=f"live: {src.name}", bounds=bounds)
-    player = Player(src, live, rate=rate, loop=loop)  # (before the recording: it refuses to record over the recording replayed)
-    recorder = live.record(record, overwrite=overwrite) if record is not None else None
-    player.start()
-    deadline = time.monotonic() + 10.0
-    while live.n_frames == 0 and not player.done.is_set() and time.monotonic() < deadline:  # the first view frames a first frame
-        time.sleep(0.02)
+    sock = listen_at(host, port)  # before anything plays or records: a bad or busy --port failed with a recording made
+    live = None
     try:
+        src = ReplaySource(source) if replay else open_source(source)
+        bounds = None
+        if isinstance(src, SyntheticSensor):
+            from ..io.demo import SCENE_SIZE
+
+            bounds = ((0.0, 0.0, -30.0), (SCENE_SIZE, SCENE_SIZE, 60.0))  # frame the town from the start
+        live = LiveCloud(keep=keep, decay=decay, name=f"live: {src.name}", bounds=bounds)
+        player = Player(src, live, rate=rate, loop=loop)  # (before the recording: it refuses to record over the recording replayed)
+        recorder = live.record(record, overwrite=overwrite) if record is not None else None
+        player.start()
+        deadline = time.monotonic() + 10.0
+        while live.n_frames == 0 and not player.done.is_set() and time.monotonic() < deadline:  # the first view frames a first frame
+            time.sleep(0.02)
         if player.error is not None:
             raise player.error
-        server = serve_at(live, host, port)  # (a port in use)
+        server = serve_at(live, host, port, sock=sock)
     except BaseException:
-        live.close()  # the player stops and the recording is closed with its index
+        sock.close()
+        if live is not None:
+            live.close()  # the player stops and the recording is closed with its index
         raise
     print(f"gigapoint viewer: {live.name} (keep {keep} frames{f', decay {decay:g} s' if decay else ''})", file=sys.stderr)
     if not server.loopback:

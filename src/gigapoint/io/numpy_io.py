@@ -59,8 +59,8 @@ def _read_npy_header(f) -> tuple[tuple, bool, np.dtype]:
 
 
 def _check_positions(path: Path, what: str, dtype: np.dtype) -> None:
-    """Bool positions were read as 0 and 1; refused as gp.from_arrays refuses them (points_for)."""
-    if dtype.kind == "b":
+    """Positions of integers or floats, in points_for's words (bools were read as 0 and 1)."""
+    if dtype.kind not in "iuf":
         raise fail(path, f"{what}: xyz must hold numbers (integers or floats), got dtype {dtype}")
 
 
@@ -75,8 +75,6 @@ def _layout_names(path: Path, what: str, dtype: np.dtype, shape: tuple) -> list[
             if name.lower() in ("x", "y", "z"):
                 _check_positions(path, f"{what} field {name!r}", dtype[name])
         return list(dtype.names)
-    if dtype.kind not in "biuf":
-        raise fail(path, f"{what}: expected a numeric array, got dtype {dtype}")
     _check_positions(path, what, dtype)
     if len(shape) != 2 or shape[1] not in _COLUMNS:
         raise fail(path, f"{what}: expected an (N, 3), (N, 4), (N, 6) or (N, 7) array, got shape {shape}")
@@ -251,7 +249,7 @@ def _npz_plan(path: Path, zf: zipfile.ZipFile) -> tuple[dict[str, _Member], list
         first = members[lower["x"]]
         for a in "xyz":  # (one of another length was dropped below, then a KeyError)
             m = members[lower[a]]
-            if len(m.shape) != 1 or m.dtype.kind not in "biuf":
+            if len(m.shape) != 1:
                 raise fail(path, f"NPZ member {m.key!r} must be a numeric (N,) array, got shape {m.shape} dtype {m.dtype}")
             _check_positions(path, f"NPZ member {m.key!r}", m.dtype)
             if m.rows != first.rows:
@@ -265,11 +263,11 @@ def _npz_plan(path: Path, zf: zipfile.ZipFile) -> tuple[dict[str, _Member], list
             return members, _layout_names(path, f"NPZ member {m.key!r}", m.dtype, m.shape), {m.key: m}
         raise fail(path, f"NPZ archive has no point positions: expected a key named one of {', '.join(XYZ_KEYS)} or x, y, z (keys: {', '.join(members)})")
     xm = members[xyz_key]
-    _check_positions(path, f"NPZ member {xm.key!r}", xm.dtype)
-    if xm.dtype.names or len(xm.shape) != 2 or xm.shape[1] != 3 or xm.dtype.kind not in "biuf":
+    if xm.dtype.names or len(xm.shape) != 2 or xm.shape[1] != 3:
         if len(members) == 1 or xm.dtype.names:
             return members, _layout_names(path, f"NPZ member {xm.key!r}", xm.dtype, xm.shape), {xm.key: xm}
         raise fail(path, f"NPZ member {xyz_key!r} must be a numeric (N, 3) array, got shape {xm.shape} dtype {xm.dtype}")
+    _check_positions(path, f"NPZ member {xm.key!r}", xm.dtype)
     _check_colors(path, members, xm)
     use = {xyz_key: xm}
     for k, m in members.items():

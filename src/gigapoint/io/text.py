@@ -215,7 +215,7 @@ def _read_layout(path: Path) -> _Layout:
 def _pts_count(line: str) -> int | None:
     """The point count of a PTS count line (one integer alone), else None."""
     tokens = line.split()
-    return int(tokens[0]) if len(tokens) == 1 and tokens[0].isdigit() else None
+    return int(tokens[0]) if len(tokens) == 1 and tokens[0].isdecimal() else None
 
 
 def _line_columns(line: str, layout: _Layout) -> list[str]:
@@ -278,19 +278,20 @@ def _chunks(path: Path, chunk_size: int, layout: _Layout, counts: list[int]) -> 
                     return
                 if layout.quoted:  # "1.5": a spreadsheet's quoted numbers (loadtxt's quotechar excludes two comment marks)
                     lines = [ln.replace('"', "") for ln in lines]
+                if layout.declared is not None:  # a multi-scan PTS: each next scan's count line, read as a blank one
+                    # (found before parsing: one failed parse per count line re-read the chunk, quadratic in scans)
+                    for i, line in enumerate(lines):
+                        if line.strip().isdecimal():
+                            counts.append(int(line))
+                            lines[i] = "\n"
                 arr = _parsed_lines(lines, layout)
-                while arr is None:
+                if arr is None:
                     bad, problem = _first_bad_line(path, lines, lineno, layout, ncols, columns)
-                    count = _pts_count(lines[bad]) if layout.declared is not None else None
-                    if count is None:  # the lines before the bad one first: a progressive load keeps them
-                        with contextlib.suppress(ValueError):
-                            before = _parsed(lines[:bad], layout.delimiter, columns) if bad else np.empty((0, used))
-                            if before.size and before.shape[1] == used:
-                                yield before
-                        raise fail(path, problem)
-                    counts.append(count)  # a multi-scan PTS: the next scan's count line, read as a blank one
-                    lines[bad] = "\n"
-                    arr = _parsed_lines(lines, layout)
+                    with contextlib.suppress(ValueError):  # the lines before the bad one first: a progressive load keeps them
+                        before = _parsed(lines[:bad], layout.delimiter, columns) if bad else np.empty((0, used))
+                        if before.size and before.shape[1] == used:
+                            yield before
+                    raise fail(path, problem)
                 lineno += len(lines)
                 if arr.size:
                     yield arr

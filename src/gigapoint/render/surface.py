@@ -15,6 +15,9 @@ from .settings import RenderSettings
 SURFACE_SETTINGS = {"size_mode": "fixed", "point_size": 1, "adaptive_precision": False}
 #: the settings that choose which points are drawn, and on what: a surface keeps the image's (the rest only shade them)
 POINTS_DRAWN = ("backend", "threads", "hidden_classes", "point_budget", "max_points", "lod_threshold_px", "lod_foveation")
+#: the settings that move a point's pixel or its depth: an image drawn with a surface's values of
+#: these (and its POINTS_DRAWN, copied) holds the surface (the others only colour the points)
+POINTS_PLACED = ("size_mode", "point_size", "point_shape", "adaptive_precision", "fill_holes", "supersample", "stereo", "opacity", "hqs")
 
 
 def surface_settings(settings: RenderSettings | None = None) -> RenderSettings:
@@ -29,7 +32,9 @@ def surface_heights(cloud, camera: Camera, settings: RenderSettings | None = Non
     NaN where none (``Camera.heights``), of the points ``settings`` draws. ``frame``: the image
     already drawn with ``settings``, reused where they draw the surface too (else a second draw:
     an adaptive splat held a neighbour's height)."""
+    settings = RenderSettings.of(settings)
     surface = surface_settings(settings)
-    if frame is None or RenderSettings.of(settings) != surface:
+    # (a colour mode or background of its own drew the surface a second time)
+    if frame is None or any(getattr(settings, name) != getattr(surface, name) for name in POINTS_PLACED):
         frame = render_frame(cloud, camera, surface)
     return camera.heights(frame.depth)

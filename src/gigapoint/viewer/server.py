@@ -467,15 +467,20 @@ class ViewerServer:
         _require_starlette()
         import uvicorn
 
-        check_address(host, port)
+        # first: listening_socket checks host and port (a given socket's were checked when it was made)
+        self.sock = sock if sock is not None else listening_socket(host, port)
         self.host = host
         self.loopback = is_loopback(host)
         self.token = token if token is not None else (None if self.loopback else secrets.token_urlsafe(18))
-        self.core = ViewerCore(cloud, settings)
+        try:
+            self.core = ViewerCore(cloud, settings)
+        except BaseException:
+            if sock is None:  # (a given socket is closed by its maker)
+                self.sock.close()
+            raise
         # the address bound is allowed too: --host 127.0.0.2 answered its own URL with 403
         allowed = LOOPBACK_HOSTS | {host.strip("[]").lower()} if self.loopback and self.token is None else None
         self.app = create_app(self.core, self.token, allowed)
-        self.sock = sock if sock is not None else listening_socket(host, port)
         self.port = self.sock.getsockname()[1]
         config = uvicorn.Config(
             self.app,
