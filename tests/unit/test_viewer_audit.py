@@ -315,7 +315,7 @@ def test_a_tab_opened_before_the_first_point_is_fit_to_the_points_once_they_come
 
     try:
         untouched, moved = (core.open_session(sent_to(tab), 96, 64) for tab in frames)
-        assert untouched.snapshot()[0].distance == pytest.approx(5e-08)  # (no point yet)
+        assert untouched.snapshot()[0].distance == pytest.approx(2.047978442474518)  # (no point yet: Camera.fit frames an empty box as a 1-unit cube, no longer 1e-6)
         moved.handle({"type": "orbit", "dyaw": 30})
         chosen = moved.snapshot()[0].as_dict()
         go_on.set()
@@ -353,7 +353,7 @@ def test_a_loading_clouds_reframe_reads_the_bounds_and_tells_each_tab_once(gated
         blind, moved = core.open_session(lambda kind, payload: True, 96, 64), core.open_session(lambda kind, payload: True, 96, 64)
         moved.handle({"type": "orbit", "dyaw": 30})
         blind.handle({"type": "refresh"})  # (not a move: it stays fit to nothing, and is the active tab)
-        assert blind.snapshot()[0].distance == pytest.approx(5e-08) and core.last_active is blind
+        assert blind.snapshot()[0].distance == pytest.approx(2.047978442474518) and core.last_active is blind  # (the 1-unit framing of no point)
         gate.set()
         assert cloud.wait(timeout=60)
         reads = []
